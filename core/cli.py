@@ -1,0 +1,128 @@
+"""The ``asmteach`` command line: a thin shell over the library.
+
+Core commands live here; plugins add theirs through the
+``asmteach_add_commands`` hook. Any :class:`UserError` becomes one line on
+stderr and exit code 2; nothing the user typed produces a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from collections.abc import Sequence
+from importlib import metadata
+from pathlib import Path
+
+from asmteach.core.errors import UserError
+
+__all__ = ["build_parser", "main"]
+
+log = logging.getLogger("asmteach")
+
+
+def _cmd_plugins(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.table import Table
+
+    from asmteach.core import registry
+    from asmteach.core.hooks import hook_errors, make_plugin_manager
+
+    infos = registry.discover(args.role)
+    table = Table(title="asmteach plugins", show_lines=False)
+    for col in ("group", "name", "distribution", "version", "status"):
+        table.add_column(col)
+    broken = 0
+    for info in infos:
+        status = "[green]ok" if info.error is None else f"[red]import error: {info.error}"
+        broken += info.error is not None
+        table.add_row(registry.group_name(info.role), info.name, info.distribution, info.version, status)
+    if args.role is None:
+        make_plugin_manager(progress=False)
+        for name, (dist, version, err) in sorted(hook_errors().items()):
+            status = "[green]ok" if err is None else f"[red]import error: {err}"
+            broken += err is not None
+            table.add_row("asmteach.hooks", name, dist, version, status)
+    Console(width=200).print(table)
+    if broken:
+        print(f"{broken} plugin(s) failed to import; the others are usable.", file=sys.stderr)
+    return 0
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from asmteach.core.config import load_run_config
+
+    cfg = load_run_config(args.config)
+    print(f"{args.config}: ok (seed {cfg.seed}; structure {cfg.structure})")
+    return 0
+
+
+def _cmd_library(args: argparse.Namespace) -> int:
+    from asmteach.core.library import render_library
+
+    out = render_library(Path(args.folder), Path(args.out))
+    print(f"part library contact sheet: {out}")
+    return 0
+
+
+def build_parser(pm=None) -> argparse.ArgumentParser:
+    """The argument parser with core commands and every plugin's commands."""
+    try:
+        version = metadata.version("asmteach")
+    except metadata.PackageNotFoundError:
+        version = "unknown"
+    parser = argparse.ArgumentParser(
+        prog="asmteach",
+        description="Teach robots mechanical assembly by demonstration (metres, radians, z up).",
+    )
+    parser.add_argument("--version", action="version", version=f"asmteach {version}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    p = sub.add_parser("plugins", help="list discovered plugins per group, with import errors")
+    p.add_argument("--role", default=None, help="only this role (e.g. detectors)")
+    p.set_defaults(func=_cmd_plugins)
+
+    p = sub.add_parser("validate", help="check a run config; errors name the key path")
+    p.add_argument("config")
+    p.set_defaults(func=_cmd_validate)
+
+    p = sub.add_parser("library", help="render every part of a part-library folder to a PNG contact sheet")
+    p.add_argument("folder", help="folder of part YAML files (searched recursively)")
+    p.add_argument("--out", required=True, help="PNG file to write")
+    p.set_defaults(func=_cmd_library)
+
+    from asmteach.core.sweep import add_sweep_command
+
+    add_sweep_command(sub)
+
+    if pm is not None:
+        pm.hook.asmteach_add_commands(subparsers=sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Console-script entry point; returns the exit code."""
+    from asmteach.core.hooks import make_plugin_manager
+
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        pm = make_plugin_manager()
+        parser = build_parser(pm)
+        args = parser.parse_args(argv)
+        if args.verbose:
+            logging.getLogger().setLevel(logging.DEBUG)
+        if getattr(args, "func", None) is None:
+            parser.print_help()
+            return 2
+        return int(args.func(args) or 0)
+    except UserError as exc:
+        print(f"asmteach: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("asmteach: interrupted; results written so far are intact", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

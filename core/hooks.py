@@ -1,0 +1,96 @@
+"""pluggy hook specifications: observers and extensions of a run.
+
+Many plugins may implement each hook at once (console progress, JSON-lines
+logs, reporters). Hook implementations are registered through the entry-point
+group ``asmteach.hooks``; the console progress display is one of them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import pluggy
+
+__all__ = ["PROJECT", "hookimpl", "hookspec", "make_plugin_manager"]
+
+log = logging.getLogger(__name__)
+
+PROJECT = "asmteach"
+hookspec = pluggy.HookspecMarker(PROJECT)
+hookimpl = pluggy.HookimplMarker(PROJECT)
+
+
+class Specs:
+    """The hook specifications. Every hook is ``asmteach_<verb>_<noun>``."""
+
+    @hookspec
+    def asmteach_stage_started(self, stage: str, total: int | None, context: dict[str, Any]) -> None:
+        """A pipeline stage began.
+
+        :param stage: stage name (``"teach"``, ``"detect"``, ``"plan"``, ...).
+        :param total: number of work items in the stage, if known (for progress bars).
+        :param context: run-level facts (output folder, seed, config name).
+        """
+
+    @hookspec
+    def asmteach_stage_progress(self, stage: str, advance: int, message: str | None) -> None:
+        """Work inside a stage advanced by ``advance`` items."""
+
+    @hookspec
+    def asmteach_stage_finished(self, stage: str, ok: bool, seconds: float, summary: dict[str, Any]) -> None:
+        """A stage ended; ``ok`` is False when it failed, ``summary`` says how."""
+
+    @hookspec
+    def asmteach_artefact_written(self, path: Path, kind: str) -> None:
+        """A result file was written atomically (``kind``: ``"json"``, ``"png"``, ``"html"``, ...)."""
+
+    @hookspec
+    def asmteach_report_ready(self, report: dict[str, Any], out_dir: Path) -> list[Path] | None:
+        """A run's report is final; reporters may write extra files and return their paths."""
+
+    @hookspec
+    def asmteach_add_commands(self, subparsers: argparse._SubParsersAction) -> None:
+        """Add CLI sub-commands; set ``func=callable(args) -> int`` as the parser default."""
+
+
+_HOOK_STATUS: dict[str, tuple[str, str, str | None]] = {}
+
+
+def hook_errors() -> dict[str, tuple[str, str, str | None]]:
+    """``name -> (distribution, version, import error or None)`` of the last load."""
+    return dict(_HOOK_STATUS)
+
+
+def _load_entry_point_hooks(pm: pluggy.PluginManager) -> None:
+    """Like ``load_setuptools_entrypoints`` but one broken plugin does not stop the rest."""
+    _HOOK_STATUS.clear()
+    for ep in sorted(metadata.entry_points(group=PROJECT + ".hooks"), key=lambda e: e.name):
+        dist = ep.dist
+        ident = (dist.metadata["Name"] if dist else "?", dist.version if dist else "?")
+        if pm.get_plugin(ep.name) is not None or pm.is_blocked(ep.name):
+            continue
+        try:
+            pm.register(ep.load(), name=ep.name)
+        except Exception as exc:  # noqa: BLE001 - reported by `asmteach plugins`
+            _HOOK_STATUS[ep.name] = (*ident, f"{type(exc).__name__}: {exc}")
+            log.warning("hook plugin %s failed to load: %s", ep.name, exc)
+            continue
+        _HOOK_STATUS[ep.name] = (*ident, None)
+
+
+def make_plugin_manager(*, load_entry_points: bool = True, progress: bool = True) -> pluggy.PluginManager:
+    """Hookspecs, then built-in implementations, then entry points, then a pending check."""
+    pm = pluggy.PluginManager(PROJECT)
+    pm.add_hookspecs(Specs)
+    if progress:
+        from asmteach.core.progress import ConsoleProgress
+
+        pm.register(ConsoleProgress(), name="console-progress")
+    if load_entry_points:
+        _load_entry_point_hooks(pm)
+    pm.check_pending()
+    return pm

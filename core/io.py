@@ -1,0 +1,118 @@
+"""Atomic file output and the file formats asmteach reads and writes.
+
+Every result file is written to a temporary sibling and renamed into place,
+so an interrupted run (Ctrl-C, crash) leaves either the old file or the new
+one, never half of one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import BaseModel
+
+from asmteach.core.errors import UserError
+
+__all__ = [
+    "append_jsonl",
+    "atomic_path",
+    "read_jsonl",
+    "read_yaml",
+    "write_bytes",
+    "write_json",
+    "write_model",
+    "write_text",
+]
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield a temporary path next to ``path``; rename it onto ``path`` on success.
+
+    Use for writers that want a file name (matplotlib, OpenCV, Open3D)::
+
+        with atomic_path("out.png") as tmp:
+            fig.savefig(tmp)
+    """
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=target.suffix, dir=target.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        os.replace(tmp, target)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
+    """Write ``data`` atomically; returns the path."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
+def write_text(path: str | os.PathLike[str], text: str) -> Path:
+    """Write UTF-8 text atomically; returns the path."""
+    return write_bytes(path, text.encode("utf-8"))
+
+
+def write_json(path: str | os.PathLike[str], obj: Any) -> Path:
+    """Write JSON (2-space indent) atomically. Pydantic models are dumped in JSON mode."""
+    if isinstance(obj, BaseModel):
+        obj = obj.model_dump(mode="json")
+    return write_text(path, json.dumps(obj, indent=2, allow_nan=True) + "\n")
+
+
+def write_model(path: str | os.PathLike[str], model: BaseModel) -> Path:
+    """Write a pydantic model as JSON atomically."""
+    return write_text(path, model.model_dump_json(indent=2) + "\n")
+
+
+def append_jsonl(path: str | os.PathLike[str], record: dict[str, Any]) -> None:
+    """Append one JSON line and fsync it, so a crash loses at most the line in flight."""
+    line = json.dumps(record, allow_nan=True) + "\n"
+    with open(path, "a", encoding="utf-8") as fh:
+        fh.write(line)
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def read_jsonl(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
+    """Read JSON lines, skipping a torn last line left by a crash."""
+    p = Path(path)
+    if not p.exists():
+        return []
+    out: list[dict[str, Any]] = []
+    for line in p.read_text(encoding="utf-8").splitlines():
+        line = line.strip()
+        if not line:
+            continue
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return out
+
+
+def read_yaml(path: str | os.PathLike[str]) -> Any:
+    """Read a YAML file with ``yaml.safe_load``; errors become one-line :class:`UserError`."""
+    p = Path(path)
+    if not p.is_file():
+        raise UserError(f"{p}: no such file")
+    try:
+        return yaml.safe_load(p.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise UserError(f"{p}: invalid YAML{where}: {problem}") from None

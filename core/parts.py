@@ -1,0 +1,152 @@
+"""Part library: parametric solids and mesh files into :class:`PartModel`.
+
+A part YAML holds one :class:`~asmteach.core.models.PartSpec`; a structure
+YAML holds an :class:`~asmteach.core.models.AssemblyTask` whose ``part_a`` and
+``part_b`` may be paths to part YAMLs (resolved relative to the structure
+file). Solids are built with trimesh's boolean engine (manifold3d).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+from pydantic import ValidationError
+
+from asmteach.core.config import format_validation_error
+from asmteach.core.errors import UserError
+from asmteach.core.interfaces import PartModel
+from asmteach.core.io import read_yaml
+from asmteach.core.models import AssemblyTask, PartSpec, Primitive, SolidSpec, resolve_relative
+
+__all__ = [
+    "build_part",
+    "build_solid",
+    "load_mesh_file",
+    "load_part_spec",
+    "load_structure",
+    "mesh_hash",
+]
+
+log = logging.getLogger(__name__)
+
+# Parts of this library are 10 mm to 1 m; a mesh whose largest extent is
+# above this is almost surely written in millimetres.
+MAX_EXTENT_M = 2.0
+MIN_EXTENT_M = 0.002
+
+
+def _primitive_mesh(p: Primitive) -> trimesh.Trimesh:
+    if p.shape == "box":
+        m = trimesh.creation.box(extents=p.size)
+    else:
+        m = trimesh.creation.cylinder(radius=p.radius, height=p.height, sections=64)
+    m.apply_transform(p.pose)
+    return m
+
+
+def build_solid(solid: SolidSpec) -> trimesh.Trimesh:
+    """Mesh of ``union(add) - union(subtract)`` (part frame, metres)."""
+    add = [_primitive_mesh(p) for p in solid.add]
+    mesh = add[0] if len(add) == 1 else trimesh.boolean.union(add, engine="manifold")
+    if solid.subtract:
+        cut = [_primitive_mesh(p) for p in solid.subtract]
+        mesh = trimesh.boolean.difference([mesh, *cut], engine="manifold")
+    mesh.merge_vertices()
+    if not mesh.is_watertight or mesh.volume <= 0:
+        raise UserError("the parametric solid is empty or not closed; check that subtract does not remove all of add")
+    return mesh
+
+
+def load_mesh_file(path: Path, units: str = "m") -> trimesh.Trimesh:
+    """Load an STL/OBJ/PLY mesh in metres; refuses millimetres given as metres.
+
+    Non-watertight meshes are replaced by their convex hull (with a warning),
+    since mass properties and stable placements need a closed surface.
+    """
+    if not path.is_file():
+        raise UserError(f"mesh file {path} does not exist")
+    try:
+        loaded = trimesh.load(path, force="mesh")
+    except Exception as exc:  # noqa: BLE001 - any loader failure is a bad file
+        raise UserError(f"{path}: cannot read the mesh ({type(exc).__name__}: {exc})") from None
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise UserError(f"{path}: the file holds no triangles")
+    mesh = loaded
+    if units == "mm":
+        mesh.apply_scale(0.001)
+    ext = float(np.max(mesh.extents))
+    if ext > MAX_EXTENT_M:
+        raise UserError(
+            f"{path}: the mesh is {ext:.0f} units across; it looks like millimetres. "
+            "Set mesh_units: mm (or pass --units mm) so it is scaled to metres"
+        )
+    if ext < MIN_EXTENT_M:
+        raise UserError(f"{path}: the mesh is only {ext * 1000:.3f} mm across; it is degenerate or in the wrong units")
+    if not mesh.is_watertight:
+        log.warning("%s is not watertight; using its convex hull for mass and placements", path)
+        mesh = mesh.convex_hull
+    if mesh.volume <= 0:
+        mesh.invert()
+    return mesh
+
+
+def mesh_hash(mesh: trimesh.Trimesh) -> str:
+    """Stable hash of a mesh's geometry (vertices to 0.1 um, faces), for caches."""
+    h = hashlib.sha256()
+    h.update(np.round(np.asarray(mesh.vertices), 7).astype("<f8").tobytes())
+    h.update(np.asarray(mesh.faces).astype("<i8").tobytes())
+    return h.hexdigest()[:16]
+
+
+def build_part(spec: PartSpec, base_dir: Path | None = None) -> PartModel:
+    """Mesh, mass and centre of mass of a part spec."""
+    if spec.solid is not None:
+        mesh = build_solid(spec.solid)
+    else:
+        mesh = load_mesh_file(resolve_relative(spec.mesh or "", base_dir or Path.cwd()), spec.mesh_units)
+    volume = float(mesh.volume)
+    mass = spec.mass if spec.mass is not None else spec.density * volume
+    if spec.center_of_mass is not None:
+        com = np.asarray(spec.center_of_mass, dtype=float)
+        if not mesh.convex_hull.contains([com])[0]:
+            raise UserError(
+                f"part {spec.name!r}: center_of_mass {com.tolist()} m lies outside the part's convex hull; "
+                "give it in the part frame in metres"
+            )
+    else:
+        com = np.asarray(mesh.center_mass, dtype=float)
+    return PartModel(spec=spec, mesh=mesh, mass=float(mass), center_of_mass=com, source_hash=mesh_hash(mesh))
+
+
+def _validate(model: type, data: Any, path: Path) -> Any:
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        raise UserError(f"{path}: {format_validation_error(exc)}") from None
+
+
+def load_part_spec(path: str | Path) -> PartSpec:
+    """Read a part YAML; a ``mesh`` path in it is made absolute."""
+    p = Path(path)
+    spec = _validate(PartSpec, read_yaml(p), p)
+    if spec.mesh is not None:
+        spec.mesh = str(resolve_relative(spec.mesh, p.resolve().parent))
+    return spec
+
+
+def load_structure(path: str | Path) -> AssemblyTask:
+    """Read a structure YAML (an assembly task with ground truth)."""
+    p = Path(path)
+    raw = read_yaml(p)
+    if not isinstance(raw, dict):
+        raise UserError(f"{p}: a structure must be a YAML mapping")
+    base = p.resolve().parent
+    for key in ("part_a", "part_b"):
+        if isinstance(raw.get(key), str):
+            raw[key] = load_part_spec(resolve_relative(raw[key], base)).model_dump()
+    return _validate(AssemblyTask, raw, p)

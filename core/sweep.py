@@ -1,0 +1,428 @@
+"""Experiment sweeps: parameter grids x seeds, resumable, parallel.
+
+An *experiment kind* is a class registered in the entry-point group
+``asmteach.experiments``. It declares a pydantic ``Params`` model, runs one
+trial from validated params and a seed, and may summarise all rows into
+tables and plots. An *experiment file* (YAML) picks the kind and the grid::
+
+    experiment: teaching_precision     # entry-point name
+    params: {frames: 30}               # base params (validated by the kind's Params)
+    grid:                              # cartesian product over dotted keys of params
+      distance: [0.35, 0.5, 0.8]
+    seeds: 3                           # an int N (seeds 0..N-1) or a list
+    workers: 2                         # local processes (default: 1)
+
+``asmteach sweep FILE --out DIR`` appends one JSON line per finished trial to
+``DIR/trials.jsonl`` (fsynced), skips trials already there when re-run (so a
+crash or Ctrl-C loses at most the trials in flight), and writes
+``summary.csv``, ``summary.md`` and the kind's own figures atomically.
+"""
+
+from __future__ import annotations
+
+import abc
+import argparse
+import csv
+import hashlib
+import io
+import itertools
+import json
+import math
+import sys
+import time
+import traceback
+from collections.abc import Iterable
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from importlib import metadata
+from pathlib import Path
+from typing import Any, ClassVar
+
+from pydantic import Field, ValidationError
+
+from asmteach.core.config import format_validation_error, set_dotted
+from asmteach.core.errors import UserError
+from asmteach.core.io import append_jsonl, read_jsonl, read_yaml, write_json, write_text
+from asmteach.core.models import StrictModel, resolve_relative
+from asmteach.core.registry import closest
+
+__all__ = [
+    "Experiment",
+    "ExperimentFile",
+    "TrialSpec",
+    "add_sweep_command",
+    "load_experiment",
+    "run_sweep",
+]
+
+GROUP = "asmteach.experiments"
+
+
+class Experiment(abc.ABC):
+    """Base of an experiment kind.
+
+    Subclasses set ``Params`` (a :class:`StrictModel`) and implement
+    :meth:`run_trial`. ``base_dir`` is the experiment file's folder, for
+    resolving paths written in params.
+    """
+
+    Params: ClassVar[type[StrictModel]]
+    """Validated parameters of one trial; grid keys are dotted paths into it."""
+
+    def __init__(self, base_dir: Path) -> None:
+        self.base_dir = base_dir
+
+    def path(self, relative: str) -> Path:
+        """Resolve a path written in the experiment file."""
+        return resolve_relative(relative, self.base_dir)
+
+    @abc.abstractmethod
+    def run_trial(self, params: Any, seed: int, workdir: Path) -> dict[str, Any]:
+        """Run one trial; return JSON-able metrics (flat ``name -> number/str/bool`` preferred).
+
+        Raise :class:`UserError` (or any exception) to record a failed trial;
+        the sweep keeps going. ``workdir`` is a per-trial folder for artefacts.
+        """
+
+    def summarize(self, rows: list[dict[str, Any]], out_dir: Path) -> list[Path]:
+        """Write kind-specific tables and figures from all rows; return their paths."""
+        return []
+
+
+class ExperimentFile(StrictModel):
+    """The YAML schema of an experiment file."""
+
+    experiment: str = Field(description="experiment kind: entry-point name in asmteach.experiments")
+    description: str = ""
+    params: dict[str, Any] = Field(default_factory=dict)
+    grid: dict[str, list[Any]] = Field(default_factory=dict)
+    seeds: int | list[int] = Field(1, description="an int N (seeds 0..N-1) or an explicit list")
+    workers: int = Field(1, ge=1, le=64)
+
+    def seed_list(self) -> list[int]:
+        return list(range(self.seeds)) if isinstance(self.seeds, int) else list(self.seeds)
+
+
+class TrialSpec(StrictModel):
+    """One trial: its grid point, seed and stable id."""
+
+    trial_id: str
+    point: dict[str, Any]
+    seed: int
+
+
+def experiment_kinds() -> dict[str, metadata.EntryPoint]:
+    """Registered experiment kinds by name."""
+    return {ep.name: ep for ep in metadata.entry_points(group=GROUP)}
+
+
+def load_kind(name: str) -> type[Experiment]:
+    """The experiment class registered as ``name``; :class:`UserError` if unknown."""
+    kinds = experiment_kinds()
+    if name not in kinds:
+        hint = closest(name, list(kinds))
+        more = f"; did you mean {hint!r}?" if hint else f" (known: {', '.join(sorted(kinds)) or 'none'})"
+        raise UserError(f"experiment: no experiment kind named {name!r}{more}")
+    cls = kinds[name].load()
+    if not (isinstance(cls, type) and issubclass(cls, Experiment)):
+        raise UserError(f"experiment kind {name!r} ({kinds[name].value}) is not an Experiment subclass")
+    return cls
+
+
+def load_experiment(path: str | Path) -> tuple[ExperimentFile, type[Experiment]]:
+    """Read and validate an experiment file and every grid point's params."""
+    p = Path(path)
+    raw = read_yaml(p)
+    if not isinstance(raw, dict):
+        raise UserError(f"{p}: an experiment file must be a YAML mapping")
+    try:
+        exp = ExperimentFile.model_validate(raw)
+    except ValidationError as exc:
+        raise UserError(f"{p}: {format_validation_error(exc)}") from None
+    kind = load_kind(exp.experiment)
+    for point in grid_points(exp):
+        params_for(kind, exp, point, where=str(p))
+    return exp, kind
+
+
+def grid_points(exp: ExperimentFile) -> list[dict[str, Any]]:
+    """Cartesian product of the grid, in file order."""
+    keys = list(exp.grid)
+    if not keys:
+        return [{}]
+    return [dict(zip(keys, values, strict=True)) for values in itertools.product(*(exp.grid[k] for k in keys))]
+
+
+def params_for(kind: type[Experiment], exp: ExperimentFile, point: dict[str, Any], *, where: str = "") -> Any:
+    """Validated params of one grid point (base params with the point's keys set)."""
+    raw = json.loads(json.dumps(exp.params))
+    for key, value in point.items():
+        set_dotted(raw, key, value)
+    try:
+        return kind.Params.model_validate(raw)
+    except ValidationError as exc:
+        prefix = f"{where}: " if where else ""
+        raise UserError(f"{prefix}{format_validation_error(exc, 'params')}") from None
+
+
+def trial_id(point: dict[str, Any], seed: int) -> str:
+    """Stable id of a trial, independent of grid order."""
+    blob = json.dumps({"point": point, "seed": seed}, sort_keys=True, default=str)
+    return hashlib.sha1(blob.encode()).hexdigest()[:12]
+
+
+def plan_trials(exp: ExperimentFile) -> list[TrialSpec]:
+    """Every (grid point, seed) pair of the experiment."""
+    return [
+        TrialSpec(trial_id=trial_id(point, seed), point=point, seed=seed)
+        for point in grid_points(exp)
+        for seed in exp.seed_list()
+    ]
+
+
+def _run_one(kind_name: str, base_dir: str, exp_json: str, trial_json: str, out_dir: str) -> dict[str, Any]:
+    """Worker entry: run one trial and return its row (never raises)."""
+    exp = ExperimentFile.model_validate_json(exp_json)
+    trial = TrialSpec.model_validate_json(trial_json)
+    t0 = time.perf_counter()
+    row: dict[str, Any] = {"trial_id": trial.trial_id, "point": trial.point, "seed": trial.seed}
+    try:
+        kind = load_kind(kind_name)
+        params = params_for(kind, exp, trial.point)
+        workdir = Path(out_dir) / "trials" / trial.trial_id
+        workdir.mkdir(parents=True, exist_ok=True)
+        metrics = kind(Path(base_dir)).run_trial(params, trial.seed, workdir)
+        row.update(ok=True, metrics=_jsonable(metrics), error=None)
+    except UserError as exc:
+        row.update(ok=False, metrics={}, error=str(exc))
+    except Exception as exc:  # noqa: BLE001 - a failed trial is a result, recorded with its reason
+        row.update(ok=False, metrics={}, error=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc(limit=8))
+    row["seconds"] = round(time.perf_counter() - t0, 4)
+    return row
+
+
+def _jsonable(obj: Any) -> Any:
+    return json.loads(json.dumps(obj, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
+
+
+def run_sweep(
+    path: str | Path,
+    out_dir: str | Path,
+    *,
+    workers: int | None = None,
+    executor: str = "local",
+    limit: int | None = None,
+    progress: bool = True,
+) -> list[dict[str, Any]]:
+    """Run (or resume) an experiment; returns every row, old and new."""
+    exp, kind = load_experiment(path)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    log_path = out / "trials.jsonl"
+    done = {r["trial_id"] for r in read_jsonl(log_path)}
+    todo = [t for t in plan_trials(exp) if t.trial_id not in done]
+    if limit is not None:
+        todo = todo[:limit]
+    write_json(out / "experiment.json", {"file": str(Path(path).resolve()), **exp.model_dump(mode="json")})
+    base_dir = str(Path(path).resolve().parent)
+    args = [(exp.experiment, base_dir, exp.model_dump_json(), t.model_dump_json(), str(out)) for t in todo]
+    n_workers = workers or exp.workers
+    bar = _Bar(len(todo), f"{exp.experiment} ({len(done)} done before)", enabled=progress)
+    try:
+        if executor == "ray":
+            _run_ray(args, log_path, bar)
+        elif n_workers <= 1:
+            for a in args:
+                row = _run_one(*a)
+                append_jsonl(log_path, row)
+                bar.advance(row)
+        else:
+            _run_pool(args, log_path, bar, n_workers)
+    finally:
+        bar.close()
+    rows = read_jsonl(log_path)
+    summarize(rows, out, kind(Path(base_dir)))
+    return rows
+
+
+def _run_pool(args: list[tuple[Any, ...]], log_path: Path, bar: _Bar, n_workers: int) -> None:
+    with ProcessPoolExecutor(max_workers=n_workers) as pool:
+        pending: set[Future[dict[str, Any]]] = set()
+        queue = list(args)
+        try:
+            while queue or pending:
+                while queue and len(pending) < 2 * n_workers:
+                    pending.add(pool.submit(_run_one, *queue.pop(0)))
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in finished:
+                    row = fut.result()
+                    append_jsonl(log_path, row)
+                    bar.advance(row)
+        except KeyboardInterrupt:
+            for fut in pending:
+                fut.cancel()
+            raise
+
+
+def _run_ray(args: list[tuple[Any, ...]], log_path: Path, bar: _Bar) -> None:
+    try:
+        import ray
+    except ImportError:
+        raise UserError("--executor ray needs Ray: pip install 'asmteach[ray]'") from None
+    if not ray.is_initialized():
+        ray.init(ignore_reinit_error=True, log_to_driver=False)
+    remote = ray.remote(_run_one)
+    refs = [remote.remote(*a) for a in args]
+    while refs:
+        ready, refs = ray.wait(refs, num_returns=1)
+        for ref in ready:
+            row = ray.get(ref)
+            append_jsonl(log_path, row)
+            bar.advance(row)
+
+
+class _Bar:
+    """A rich progress bar over trials (on stderr), or nothing."""
+
+    def __init__(self, total: int, label: str, *, enabled: bool) -> None:
+        self.progress = None
+        if enabled and total:
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+            self.progress = Progress(
+                TextColumn(label),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TimeRemainingColumn(),
+                TextColumn("{task.fields[failed]} failed"),
+            )
+            self.task = self.progress.add_task(label, total=total, failed=0)
+            self.failed = 0
+            self.progress.start()
+
+    def advance(self, row: dict[str, Any]) -> None:
+        if self.progress is not None:
+            self.failed += not row.get("ok", False)
+            self.progress.update(self.task, advance=1, failed=self.failed)
+
+    def close(self) -> None:
+        if self.progress is not None:
+            self.progress.stop()
+
+
+# ---------------------------------------------------------------- summaries
+def flatten(row: dict[str, Any]) -> dict[str, Any]:
+    """One flat record per trial: grid keys, seed, ok, error, seconds and metrics."""
+    flat: dict[str, Any] = {**row.get("point", {}), "seed": row.get("seed"), "ok": row.get("ok")}
+    for k, v in (row.get("metrics") or {}).items():
+        if isinstance(v, int | float | str | bool) or v is None:
+            flat[k] = v
+    flat["seconds"] = row.get("seconds")
+    flat["error"] = row.get("error") or ""
+    return flat
+
+
+def _num(v: Any) -> float | None:
+    if isinstance(v, bool) or v is None:
+        return float(v) if isinstance(v, bool) else None
+    if isinstance(v, int | float) and math.isfinite(v):
+        return float(v)
+    return None
+
+
+def group_table(rows: list[dict[str, Any]], keys: Iterable[str]) -> list[dict[str, Any]]:
+    """Per grid point: trial count, success rate and median / max of each numeric metric."""
+    import numpy as np
+
+    keys = list(keys)
+    groups: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
+    for r in rows:
+        f = flatten(r)
+        groups.setdefault(tuple(json.dumps(f.get(k), default=str) for k in keys), []).append(f)
+    table = []
+    for gkey, members in groups.items():
+        rec: dict[str, Any] = {k: json.loads(v) for k, v in zip(keys, gkey, strict=True)}
+        rec["trials"] = len(members)
+        rec["ok_rate"] = round(sum(bool(m["ok"]) for m in members) / len(members), 4)
+        metric_names = [k for k in members[0] if k not in (*keys, "seed", "ok", "error")]
+        for name in metric_names:
+            vals = [x for x in (_num(m.get(name)) for m in members) if x is not None]
+            if vals:
+                rec[f"{name}_median"] = round(float(np.median(vals)), 6)
+                rec[f"{name}_max"] = round(float(np.max(vals)), 6)
+        table.append(rec)
+    return table
+
+
+def to_csv(records: list[dict[str, Any]]) -> str:
+    """Records as CSV text (union of keys, in first-seen order)."""
+    cols: list[str] = []
+    for r in records:
+        cols += [k for k in r if k not in cols]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=cols)
+    w.writeheader()
+    for r in records:
+        w.writerow({k: r.get(k, "") for k in cols})
+    return buf.getvalue()
+
+
+def to_markdown(records: list[dict[str, Any]], cols: list[str] | None = None) -> str:
+    """Records as a GitHub markdown table."""
+    if not records:
+        return "_no trials_\n"
+    cols = cols or list(dict.fromkeys(k for r in records for k in r))
+
+    def cell(v: Any) -> str:
+        if isinstance(v, float):
+            return f"{v:.4g}"
+        return str(v).replace("|", "\\|")
+
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    lines += ["| " + " | ".join(cell(r.get(c, "")) for c in cols) + " |" for r in records]
+    return "\n".join(lines) + "\n"
+
+
+def summarize(rows: list[dict[str, Any]], out: Path, kind: Experiment) -> list[Path]:
+    """Generic summary (per-trial CSV, per-point table) plus the kind's own outputs."""
+    keys = list(dict.fromkeys(k for r in rows for k in r.get("point", {})))
+    flat = [flatten(r) for r in rows]
+    table = group_table(rows, keys)
+    paths = [
+        write_text(out / "trials.csv", to_csv(flat)),
+        write_text(out / "summary.csv", to_csv(table)),
+    ]
+    n_ok = sum(bool(r.get("ok")) for r in rows)
+    md = f"# Sweep summary\n\n{len(rows)} trials, {n_ok} succeeded.\n\n" + to_markdown(table)
+    failures = [r for r in rows if not r.get("ok")]
+    if failures:
+        md += "\n## Failed trials\n\n" + to_markdown(
+            [
+                {"trial": r["trial_id"], "seed": r["seed"], **r.get("point", {}), "error": r.get("error")}
+                for r in failures[:50]
+            ]
+        )
+    paths.append(write_text(out / "summary.md", md))
+    paths += kind.summarize(rows, out) or []
+    return paths
+
+
+# ---------------------------------------------------------------- CLI
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    rows = run_sweep(args.experiment, args.out, workers=args.workers, executor=args.executor, limit=args.limit)
+    n_ok = sum(bool(r.get("ok")) for r in rows)
+    print(f"{len(rows)} trials ({n_ok} ok); summary: {Path(args.out) / 'summary.md'}")
+    summary = Path(args.out) / "summary.md"
+    if summary.exists() and len(summary.read_text()) < 6000:
+        sys.stdout.write(summary.read_text())
+    return 0
+
+
+def add_sweep_command(sub: argparse._SubParsersAction) -> None:
+    """Register ``asmteach sweep``."""
+    p = sub.add_parser("sweep", help="run an experiment file: grid x seeds, resumable, parallel")
+    p.add_argument("experiment", help="experiment YAML (configs/experiments/...)")
+    p.add_argument("--out", required=True, help="output folder; re-running resumes it")
+    p.add_argument("--workers", type=int, default=None, help="local processes (default: the file's workers)")
+    p.add_argument("--executor", choices=["local", "ray"], default="local", help="ray needs asmteach[ray]")
+    p.add_argument("--limit", type=int, default=None, help="run at most this many new trials")
+    p.set_defaults(func=_cmd_sweep)
