@@ -116,7 +116,9 @@ def validate_settings(cls: type[Plugin], settings: dict[str, Any], *, where: str
         raise UserError(format_validation_error(exc, where)) from None
 
 
-def load_run_config(path: str | Path, *, check_plugins: bool = True, overrides: dict[str, Any] | None = None) -> RunConfig:
+def load_run_config(
+    path: str | Path, *, check_plugins: bool = True, overrides: dict[str, Any] | None = None
+) -> RunConfig:
     """Read and validate a run config, including every chosen plugin's settings.
 
     ``overrides`` maps dotted keys (``"detector.settings.voxel_size"``) to

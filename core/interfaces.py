@@ -53,7 +53,7 @@ class NoSettings(StrictModel):
     """Settings of a plugin that takes none."""
 
 
-class Plugin(abc.ABC):
+class Plugin(abc.ABC):  # noqa: B024 - abstract by intent; roles add the abstract methods
     """Base of every plugin: holds validated settings and the run's seed."""
 
     Settings: ClassVar[type[StrictModel]] = NoSettings

@@ -81,8 +81,15 @@ def write_model(path: str | os.PathLike[str], model: BaseModel) -> Path:
 def append_jsonl(path: str | os.PathLike[str], record: dict[str, Any]) -> None:
     """Append one JSON line and fsync it, so a crash loses at most the line in flight."""
     line = json.dumps(record, allow_nan=True) + "\n"
-    with open(path, "a", encoding="utf-8") as fh:
-        fh.write(line)
+    with open(path, "a+b") as fh:
+        # A crash can leave a torn last line; start on a fresh line so the torn
+        # fragment stays alone (and is skipped) instead of swallowing this record.
+        fh.seek(0, os.SEEK_END)
+        if fh.tell() > 0:
+            fh.seek(-1, os.SEEK_END)
+            if fh.read(1) != b"\n":
+                line = "\n" + line
+        fh.write(line.encode("utf-8"))
         fh.flush()
         os.fsync(fh.fileno())
 

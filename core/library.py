@@ -13,15 +13,15 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-from asmteach.core.errors import UserError  # noqa: E402
-from asmteach.core.geometry import transform_points  # noqa: E402
-from asmteach.core.io import atomic_path  # noqa: E402
-from asmteach.core.models import AssemblyTask, MarkerSpec  # noqa: E402
-from asmteach.core.parts import build_part, load_structure  # noqa: E402
+from asmteach.core.errors import UserError
+from asmteach.core.geometry import transform_points
+from asmteach.core.io import atomic_path
+from asmteach.core.models import AssemblyTask, MarkerSpec
+from asmteach.core.parts import build_part, load_structure
 
 __all__ = ["draw_part", "find_structures", "render_library"]
 

@@ -1,0 +1,72 @@
+"""Sweeps: grid x seeds, one JSON line per trial, resume without loss, failures recorded."""
+
+import json
+import textwrap
+
+import pytest
+
+from asmteach.core.cli import main
+from asmteach.core.errors import UserError
+from asmteach.core.io import read_jsonl
+from asmteach.core.sweep import run_sweep
+
+
+@pytest.fixture
+def experiment(tmp_path, toy_dist):
+    path = tmp_path / "square.yaml"
+    path.write_text(
+        textwrap.dedent(
+            """
+            experiment: toy_square
+            params: {fail_above: 2.5}
+            grid:
+              x: [1.0, 2.0, 3.0]
+            seeds: 2
+            """
+        )
+    )
+    return path
+
+
+def test_sweep_runs_grid_times_seeds_and_records_failures(experiment, tmp_path):
+    out = tmp_path / "out"
+    rows = run_sweep(experiment, out, progress=False)
+    assert len(rows) == 6
+    ok = {(r["point"]["x"], r["seed"]): r["metrics"]["square"] for r in rows if r["ok"]}
+    assert ok == {(1.0, 0): 1.0, (1.0, 1): 2.0, (2.0, 0): 4.0, (2.0, 1): 5.0}
+    failed = [r for r in rows if not r["ok"]]
+    assert len(failed) == 2 and all("x=3.0 too large" in r["error"] for r in failed)
+    assert (out / "summary.csv").read_text().startswith("x,trials,ok_rate")
+    assert "| x | trials | ok_rate" in (out / "summary.md").read_text()
+    assert (out / "square.txt").read_text() == "6"
+
+
+def test_sweep_resumes_without_repeating_or_losing(experiment, tmp_path):
+    out = tmp_path / "out"
+    run_sweep(experiment, out, limit=2, progress=False)
+    assert len(read_jsonl(out / "trials.jsonl")) == 2
+    # a torn last line (crash mid-write) is ignored, not fatal
+    with open(out / "trials.jsonl", "a") as fh:
+        fh.write('{"trial_id": "torn')
+    rows = run_sweep(experiment, out, progress=False)
+    ids = [r["trial_id"] for r in rows]
+    assert len(ids) == 6 and len(set(ids)) == 6
+
+
+def test_sweep_parallel_matches_serial(experiment, tmp_path):
+    serial = run_sweep(experiment, tmp_path / "a", progress=False)
+    parallel = run_sweep(experiment, tmp_path / "b", workers=2, progress=False)
+
+    def key(rows):
+        return sorted((r["trial_id"], json.dumps(r["metrics"], sort_keys=True)) for r in rows)
+
+    assert key(serial) == key(parallel)
+
+
+def test_bad_grid_key_is_a_user_error(tmp_path, toy_dist):
+    path = tmp_path / "bad.yaml"
+    path.write_text("experiment: toy_square\ngrid: {y: [1]}\n")
+    with pytest.raises(UserError, match=r"params\.y: unknown key"):
+        run_sweep(path, tmp_path / "o", progress=False)
+    path.write_text("experiment: toy_squar\n")
+    assert main(["sweep", str(path), "--out", str(tmp_path / "o")]) == 2
