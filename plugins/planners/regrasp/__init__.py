@@ -1,0 +1,1 @@
+"""Three-layer regrasp graph: start pose, intermediate placements, goal pose."""

@@ -1,0 +1,147 @@
+"""The regrasp graph of the paper's "Motion planning" section, with networkx.
+
+Nodes are ``(slot, grasp_id, arm)``: a grasp of the part that is IK-feasible
+and collision-free while the part sits at one *slot* (the detected start
+pose, an intermediate stable placement at a sampled yaw, or the goal /
+pre-assembly pose). Edges:
+
+* **transfer** - same grasp and arm at two slots: the robot carries the part
+  from one pose to the other without letting go;
+* **transit** (a regrasp) - two grasps at one table slot (start or middle):
+  the robot puts the part down, lets go and grasps it again.
+
+Weights prefer fewer regrasps (``regrasp_penalty`` each), then shorter joint
+motion (``motion_weight`` x joint-space distance, radians). A path from the
+virtual ``START`` node to the virtual ``GOAL`` node is the keyframe sequence.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+import networkx as nx
+import numpy as np
+
+__all__ = [
+    "GOAL",
+    "START",
+    "GraspFeasibility",
+    "KeyframeSearch",
+    "PoseSlot",
+    "build_regrasp_graph",
+    "search_keyframes",
+]
+
+START = ("START", -1, "")
+GOAL = ("GOAL", -1, "")
+Layer = Literal["start", "middle", "goal"]
+Node = tuple[str, int, str]
+
+
+@dataclass(frozen=True)
+class PoseSlot:
+    """A pose of the part at which grasps are evaluated (``T_world_part``, metres)."""
+
+    name: str
+    layer: Layer
+    T_world_part: np.ndarray = field(compare=False, hash=False, repr=False)
+
+
+@dataclass
+class GraspFeasibility:
+    """Grasps usable at one slot: ``(grasp_id, arm) -> q`` (joint positions, radians)."""
+
+    slot: PoseSlot
+    solutions: dict[tuple[int, str], np.ndarray]
+    rejected: dict[tuple[int, str], str] = field(default_factory=dict)
+    """Why the other grasps are unusable here (``"ik"``, ``"collision: LARM_JOINT5_Link/table"``)."""
+
+
+@dataclass
+class KeyframeSearch:
+    """Result of a search: the node path (without START/GOAL) or why there is none."""
+
+    success: bool
+    nodes: list[Node] = field(default_factory=list)
+    cost: float = float("inf")
+    regrasps: int = 0
+    reason: str | None = None
+
+
+def build_regrasp_graph(
+    layers: Sequence[GraspFeasibility],
+    *,
+    regrasp_penalty: float = 10.0,
+    motion_weight: float = 1.0,
+) -> nx.Graph:
+    """Build the graph from the feasible grasps of every slot.
+
+    Exactly one slot must be in the ``start`` layer and at least one in the
+    ``goal`` layer. Node attributes: ``q``, ``slot``, ``layer``, ``grasp``,
+    ``arm``. Edge attributes: ``kind`` (``transfer`` / ``transit``) and ``weight``.
+    """
+    if sum(f.slot.layer == "start" for f in layers) != 1:
+        raise ValueError("the regrasp graph needs exactly one start slot")
+    if not any(f.slot.layer == "goal" for f in layers):
+        raise ValueError("the regrasp graph needs a goal slot")
+    G = nx.Graph()
+    G.add_node(START)
+    G.add_node(GOAL)
+    by_key: dict[tuple[int, str], list[Node]] = {}
+    for feas in layers:
+        nodes = []
+        for (gid, arm), q in sorted(feas.solutions.items()):
+            node = (feas.slot.name, gid, arm)
+            G.add_node(node, q=np.asarray(q, float), slot=feas.slot, layer=feas.slot.layer, grasp=gid, arm=arm)
+            nodes.append(node)
+            by_key.setdefault((gid, arm), []).append(node)
+            if feas.slot.layer == "start":
+                G.add_edge(START, node, kind="virtual", weight=0.0)
+            if feas.slot.layer == "goal":
+                G.add_edge(node, GOAL, kind="virtual", weight=0.0)
+        if feas.slot.layer in ("start", "middle"):
+            # Regrasp on the table: any two grasps at the same slot; an arm change costs the same.
+            for i, a in enumerate(nodes):
+                qa = G.nodes[a]["q"]
+                for b in nodes[i + 1 :]:
+                    motion = _joint_distance(qa, G.nodes[b]["q"]) if a[2] == b[2] else 0.0
+                    G.add_edge(a, b, kind="transit", weight=regrasp_penalty + motion_weight * motion)
+    for nodes in by_key.values():
+        for i, a in enumerate(nodes):
+            for b in nodes[i + 1 :]:
+                if G.nodes[a]["layer"] == "goal" and G.nodes[b]["layer"] == "goal":
+                    continue
+                motion = _joint_distance(G.nodes[a]["q"], G.nodes[b]["q"])
+                G.add_edge(a, b, kind="transfer", weight=1.0 + motion_weight * motion)
+    return G
+
+
+def _joint_distance(qa: np.ndarray, qb: np.ndarray) -> float:
+    return float(np.linalg.norm(qa - qb)) if qa.shape == qb.shape else 0.0
+
+
+def search_keyframes(G: nx.Graph, *, banned_edges: Iterable[tuple[Node, Node]] = ()) -> KeyframeSearch:
+    """Cheapest START -> GOAL path, ignoring ``banned_edges`` (motions that failed).
+
+    The reason of a failure says which layer is cut off: no feasible grasp at
+    the start, none at the goal, or no grasp shared between the layers.
+    """
+    banned = {frozenset(e) for e in banned_edges}
+    view = nx.subgraph_view(G, filter_edge=lambda a, b: frozenset((a, b)) not in banned)
+    if view.degree(START) == 0:
+        return KeyframeSearch(False, reason="no grasp is feasible at the start pose (IK or collision)")
+    if view.degree(GOAL) == 0:
+        return KeyframeSearch(False, reason="no grasp is feasible at the goal pose (IK or collision)")
+    try:
+        cost, path = nx.single_source_dijkstra(view, START, GOAL, weight="weight")
+    except nx.NetworkXNoPath:
+        return KeyframeSearch(
+            False,
+            reason="no grasp is shared between the start and goal layers, even through intermediate placements",
+        )
+    nodes = [n for n in path if n not in (START, GOAL)]
+    regrasps = sum(G.edges[a, b]["kind"] == "transit" for a, b in itertools.pairwise(nodes))
+    return KeyframeSearch(True, nodes=nodes, cost=float(cost), regrasps=regrasps)
