@@ -1,0 +1,110 @@
+"""``asmteach placements MESH --out placements.json``: stable placements of any mesh or library part.
+
+``MESH`` is a mesh file (STL/OBJ/PLY; ``--units m|mm``), a part YAML or a
+structure YAML of the part library (both of its parts). The JSON holds, per
+part, the placements (``T_table_part`` 4x4 in metres with the part resting on
+z = 0 at its canonical yaw, ``probability``, ``margin``, ``support_polygon``,
+``symmetry_yaws``) and the facets refused by the margin test; a contact-sheet
+PNG is written next to it.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import ValidationError
+
+from asmteach.core.config import format_validation_error
+from asmteach.core.errors import UserError
+from asmteach.core.hooks import hookimpl
+from asmteach.core.interfaces import PartModel
+from asmteach.core.io import read_yaml, write_json
+from asmteach.core.models import PartSpec
+from asmteach.core.parts import build_part, load_part_spec, load_structure
+from asmteach.plugins.planners.placements.contact_sheet import render_contact_sheet
+from asmteach.plugins.planners.placements.planner import PlacementResult, placement_result
+
+__all__ = ["asmteach_add_commands", "load_parts"]
+
+MESH_SUFFIXES = {".stl", ".obj", ".ply", ".off", ".glb", ".gltf"}
+
+
+def load_parts(source: str | Path, *, units: str = "m", com: list[float] | None = None) -> list[PartModel]:
+    """Parts named by ``source``: a mesh file, a part YAML or a structure YAML (its two parts)."""
+    path = Path(source)
+    if not path.exists():
+        raise UserError(f"{path}: no such file")
+    suffix = path.suffix.lower()
+    if suffix in (".yaml", ".yml"):
+        raw = read_yaml(path)
+        if isinstance(raw, dict) and "part_a" in raw:
+            if com is not None:
+                raise UserError("--com applies to one part; a structure file has two (set center_of_mass in its YAML)")
+            task = load_structure(path)
+            return [build_part(spec, path.resolve().parent) for spec in (task.part_a, task.part_b)]
+        spec = load_part_spec(path)
+        if com is not None:
+            spec = spec.model_copy(update={"center_of_mass": np.asarray(com, dtype=float)})
+        return [build_part(spec, path.resolve().parent)]
+    if suffix not in MESH_SUFFIXES:
+        raise UserError(f"{path}: not a mesh ({', '.join(sorted(MESH_SUFFIXES))}) nor a part/structure YAML")
+    try:
+        spec = PartSpec(name=path.stem, mesh=str(path.resolve()), mesh_units=units, center_of_mass=com)
+    except ValidationError as exc:
+        raise UserError(format_validation_error(exc, "--com")) from None
+    return [build_part(spec)]
+
+
+def _part_record(part: PartModel, result: PlacementResult) -> dict[str, Any]:
+    return {
+        "part": part.name,
+        "mesh_hash": part.source_hash,
+        "units": "m",
+        "mass": part.mass,
+        "center_of_mass": np.asarray(part.center_of_mass).tolist(),
+        "seconds": result.seconds,
+        "notes": result.notes,
+        "placements": [p.model_dump(mode="json") for p in result.placements],
+        "rejected": [vars(r) for r in result.rejected],
+    }
+
+
+def _cmd_placements(args: argparse.Namespace) -> int:
+    parts = load_parts(args.mesh, units=args.units, com=args.com)
+    out = Path(args.out)
+    records = []
+    for part in parts:
+        result = placement_result(part, min_margin=args.min_margin, angle_tol_deg=args.angle_tol_deg)
+        records.append(_part_record(part, result))
+        sheet = out.with_suffix(".png") if len(parts) == 1 else out.with_name(f"{out.stem}_{part.name}.png")
+        if not args.no_sheet:
+            render_contact_sheet(
+                part.mesh, result.placements, part.center_of_mass, sheet, title=f"{part.name}: stable placements"
+            )
+        probs = ", ".join(f"{p.probability:.2f}" for p in result.placements)
+        print(f"{part.name}: {len(result.placements)} stable placements (p = {probs}); "
+              f"{len(result.rejected)} refused by the margin test" + ("" if args.no_sheet else f"; sheet {sheet}"))
+        if not result.placements:
+            print(f"{part.name}: no facet passes d/h >= {args.min_margin}; lower --min-margin to see marginal ones")
+    payload: dict[str, Any] = records[0] if len(records) == 1 else {"source": str(args.mesh), "parts": records}
+    write_json(out, payload)
+    print(f"placements: {out}")
+    return 0
+
+
+@hookimpl
+def asmteach_add_commands(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``asmteach placements``."""
+    p = subparsers.add_parser("placements", help="stable placements of a mesh or library part (JSON + PNG)")
+    p.add_argument("mesh", help="mesh file (STL/OBJ/PLY) or a part/structure YAML of the library")
+    p.add_argument("--out", required=True, help="placements JSON; the contact sheet PNG goes next to it")
+    p.add_argument("--units", choices=["m", "mm"], default="m", help="units of a mesh file (default m)")
+    p.add_argument("--com", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
+                   help="centre of mass in the part frame, metres (default: uniform density)")
+    p.add_argument("--min-margin", type=float, default=0.1, help="stability margin d/h (default 0.1)")
+    p.add_argument("--angle-tol-deg", type=float, default=1.0, help="coplanar-face tolerance, degrees")
+    p.add_argument("--no-sheet", action="store_true", help="skip the contact-sheet PNG")
+    p.set_defaults(func=_cmd_placements)

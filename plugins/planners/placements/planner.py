@@ -1,0 +1,295 @@
+"""Stable placements of a part: :func:`compute_placements`.
+
+Pipeline (paper, section "Noise correction using geometric constraints"):
+convex hull -> support facets (coplanar hull faces) -> stability test with a
+margin -> one :class:`~asmteach.core.models.Placement` per stable facet, with
+its rotation (facet on the table, canonical yaw), support polygon, landing
+probability and rotational symmetry about the table normal.
+
+Frames: ``T_table_part`` maps part-frame points (metres) into the table frame
+(z up, table surface z = 0). Canonical yaw: the rotation has fixed-axis yaw 0
+(``R = Ry(pitch) Rx(roll)``), and the COM sits above the table origin.
+Results are cached in memory per (mesh hash, COM, settings).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import trimesh
+
+from asmteach.core import geometry
+from asmteach.core.errors import UserError
+from asmteach.core.interfaces import PartModel
+from asmteach.core.models import Placement
+from asmteach.core.parts import mesh_hash
+from asmteach.plugins.planners.placements.facets import SupportFacets, convex_hull, support_facets
+from asmteach.plugins.planners.placements.stability import (
+    DirectionStability,
+    FacetStability,
+    evaluate_direction,
+    facet_stability,
+)
+from asmteach.plugins.planners.placements.symmetry import SymmetryFinder, symmetry_yaws
+
+__all__ = [
+    "PlacementResult",
+    "RejectedFacet",
+    "canonical_rotation",
+    "clear_cache",
+    "compute_placements",
+    "plan_placements",
+]
+
+log = logging.getLogger(__name__)
+
+_CACHE_SIZE = 64
+_MAX_FACE_TRIALS = 200
+_cache: OrderedDict[tuple[Any, ...], PlacementResult] = OrderedDict()
+_warned: set[str] = set()
+
+
+@dataclass
+class RejectedFacet:
+    """A facet that holds the part (COM inside) but fails the margin test."""
+
+    normal: list[float]
+    margin: float
+    probability: float
+    reason: str
+
+
+@dataclass
+class PlacementResult:
+    """Placements of one part plus what was rejected and how long it took.
+
+    ``hull`` is the convex hull (part frame, metres); ``facets`` and
+    ``stability`` are the per-facet figures; ``seconds`` the planning time
+    (symmetry included) of the computation that filled the cache.
+    """
+
+    placements: list[Placement]
+    rejected: list[RejectedFacet]
+    hull: trimesh.Trimesh
+    center_of_mass: np.ndarray
+    facets: SupportFacets
+    stability: FacetStability
+    facet_of_placement: list[int]
+    seconds: float
+    notes: list[str] = field(default_factory=list)
+
+
+def canonical_rotation(normal: np.ndarray) -> np.ndarray:
+    """``(3, 3)`` rotation taking the outward facet ``normal`` (part frame) to ``-z``, with rpy yaw 0.
+
+    With ``R = Ry(pitch) Rx(roll)`` the part-frame up vector ``u = -normal`` is
+    ``R``'s last row ``(-sin p, cos p sin r, cos p cos r)``, which gives roll and
+    pitch in closed form (roll 0 when ``u`` is along x, where it is free).
+    """
+    u = -np.asarray(normal, dtype=float) / np.linalg.norm(normal)
+    pitch = -np.arcsin(np.clip(u[0], -1.0, 1.0))
+    roll = np.arctan2(u[1], u[2]) if np.hypot(u[1], u[2]) > 1e-12 else 0.0
+    cr, sr, cp, sp = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch)
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+    Ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    return Ry @ Rx
+
+
+def _support_polygon(points_table: np.ndarray) -> np.ndarray:
+    """Counter-clockwise support polygon of table-frame contact points (``(n, 2)``, metres).
+
+    The contact points are the vertices of one face of a convex polytope, so
+    they are in convex position: sorting them by angle about their centroid
+    orders the polygon (no hull computation needed).
+    """
+    xy = points_table[:, :2]
+    c = xy.mean(axis=0)
+    order = np.argsort(np.arctan2(xy[:, 1] - c[1], xy[:, 0] - c[0]), kind="stable")
+    return xy[order]
+
+
+def _axis_order(finder: SymmetryFinder | None, normal: np.ndarray, memo: dict[tuple[float, ...], int]) -> int:
+    """Symmetry order about the axis along ``normal``; opposite facets share an axis."""
+    if finder is None:
+        return 1
+    axis = normal if (normal[np.argmax(np.abs(normal))] > 0) else -normal
+    key = tuple(np.round(axis, 6).tolist())
+    if key not in memo:
+        memo[key] = finder.order(axis)
+    return memo[key]
+
+
+def _exact_support(
+    facets: SupportFacets, c: int, hv: np.ndarray, com: np.ndarray, min_margin: float
+) -> tuple[np.ndarray, DirectionStability] | None:
+    """The exact resting plane of facet ``c`` and its stability, or None when none holds the part.
+
+    A facet of exactly coplanar faces rests on its mean plane. A facet of
+    nearly coplanar faces (a scan) touches its mean plane at fewer than three
+    vertices; the part then rocks onto one of its hull faces, so the face
+    planes are tried (largest first) and the one with the best margin is kept.
+    """
+    ev = evaluate_direction(hv, com, facets.normals[c])
+    if ev.margin >= min_margin:
+        return facets.normals[c], ev
+    faces = np.flatnonzero(facets.face_cluster == c)
+    faces = faces[np.argsort(-facets.face_areas[faces], kind="stable")][:_MAX_FACE_TRIALS]
+    best: tuple[np.ndarray, DirectionStability] | None = None
+    for f in faces:
+        n = facets.face_normals[f]
+        ev_f = evaluate_direction(hv, com, n)
+        if ev_f.margin >= min_margin and (best is None or ev_f.margin > best[1].margin):
+            best = (n, ev_f)
+    return best
+
+
+def plan_placements(
+    mesh: trimesh.Trimesh,
+    center_of_mass: np.ndarray | None = None,
+    *,
+    min_margin: float = 0.1,
+    angle_tol_deg: float = 1.0,
+    min_probability: float = 0.0,
+    symmetry: bool = True,
+    max_symmetry_order: int = 36,
+    name: str = "the mesh",
+) -> PlacementResult:
+    """Compute the stable placements of ``mesh`` (no cache).
+
+    Parameters
+    ----------
+    mesh : part mesh, part frame, metres. An open mesh is replaced by its hull (warned once).
+    center_of_mass : ``(3,)`` part frame, metres; default: the mesh's (or its hull's, if open).
+    min_margin : smallest ``d / h`` of a stable placement (dimensionless).
+    angle_tol_deg : faces whose normals differ by less are one support facet.
+    min_probability : placements less likely than this are dropped (0 keeps every stable one).
+    symmetry : find each placement's rotational symmetry about the table normal.
+    name : how messages refer to the part.
+
+    Raises :class:`UserError` for flat or degenerate meshes and a COM outside the hull.
+    """
+    t0 = time.perf_counter()
+    notes: list[str] = []
+    if not mesh.is_watertight:
+        key = mesh_hash(mesh)
+        if key not in _warned:
+            _warned.add(key)
+            log.warning("%s is not watertight; placements use its convex hull", name)
+        notes.append("mesh not watertight: convex hull used")
+    hull = convex_hull(mesh, name=name)
+    if center_of_mass is None:
+        center_of_mass = mesh.center_mass if mesh.is_watertight else hull.center_mass
+    com = np.asarray(center_of_mass, dtype=float)
+    if com.shape != (3,) or not np.all(np.isfinite(com)):
+        raise UserError(f"{name}: the centre of mass must be three finite numbers (metres), got {com.tolist()}")
+    hv = np.array(hull.vertices, dtype=float)
+    hn = np.array(hull.face_normals, dtype=float)
+    outside = float(np.max(hn @ com - np.einsum("ij,ij->i", hn, hv[np.asarray(hull.faces)[:, 0]])))
+    if outside >= 0.0:
+        raise UserError(
+            f"{name}: the centre of mass {np.round(com, 6).tolist()} m lies outside the convex hull "
+            f"(by {outside * 1000:.3f} mm); give it in the part frame, in metres"
+        )
+    facets = support_facets(hull, angle_tol=np.radians(angle_tol_deg))
+    stab = facet_stability(facets, com, min_margin=min_margin)
+
+    keep = np.flatnonzero(stab.stable & (stab.probability >= min_probability))
+    keep = keep[np.lexsort((-stab.margin[keep], -stab.probability[keep]))]
+    finder = SymmetryFinder(mesh, hv, com, max_order=max_symmetry_order) if symmetry else None
+    placements: list[Placement] = []
+    kept: list[int] = []
+    orders: dict[tuple[float, ...], int] = {}
+    refused: list[RejectedFacet] = []
+    for c in keep:
+        exact = _exact_support(facets, int(c), hv, com, min_margin)
+        if exact is None:
+            refused.append(
+                RejectedFacet(
+                    normal=facets.normals[c].round(6).tolist(),
+                    margin=float(stab.margin[c]),
+                    probability=float(stab.probability[c]),
+                    reason="near-coplanar facet: no single hull face of it holds the COM with the margin",
+                )
+            )
+            continue
+        normal, ev = exact
+        R = canonical_rotation(normal)
+        pts = hv @ R.T
+        t = np.array([-(R @ com)[0], -(R @ com)[1], -pts[:, 2].min()])
+        T = geometry.from_rotation(R, t)
+        contact = geometry.transform_points(T, ev.contacts)
+        order = _axis_order(finder, normal, orders)
+        placements.append(
+            Placement(
+                id=len(placements),
+                T_table_part=T,
+                probability=float(np.clip(stab.probability[c], 0.0, 1.0)),
+                margin=float(ev.margin),
+                support_polygon=_support_polygon(contact),
+                symmetry_yaws=symmetry_yaws(order),
+            )
+        )
+        kept.append(int(c))
+    rejected = [
+        RejectedFacet(
+            normal=facets.normals[c].round(6).tolist(),
+            margin=float(stab.margin[c]),
+            probability=float(stab.probability[c]),
+            reason=(
+                f"margin {stab.margin[c]:.3f} < {min_margin}"
+                if not stab.stable[c]
+                else f"probability {stab.probability[c]:.3g} < {min_probability}"
+            ),
+        )
+        for c in np.flatnonzero(stab.holds & ~np.isin(np.arange(facets.count), keep))
+    ] + refused
+    if not placements:
+        notes.append("no facet passes the stability test")
+    return PlacementResult(
+        placements=placements,
+        rejected=rejected,
+        hull=hull,
+        center_of_mass=com,
+        facets=facets,
+        stability=stab,
+        facet_of_placement=kept,
+        seconds=time.perf_counter() - t0,
+        notes=notes,
+    )
+
+
+def placement_result(part: PartModel, **kwargs: Any) -> PlacementResult:
+    """Cached :func:`plan_placements` for a :class:`PartModel` (key: mesh hash, COM, settings)."""
+    key = (
+        part.source_hash or mesh_hash(part.mesh),
+        tuple(np.round(np.asarray(part.center_of_mass, dtype=float), 9).tolist()),
+        tuple(sorted(kwargs.items())),
+    )
+    hit = _cache.get(key)
+    if hit is None:
+        hit = plan_placements(part.mesh, part.center_of_mass, name=f"part {part.name!r}", **kwargs)
+        _cache[key] = hit
+        while len(_cache) > _CACHE_SIZE:
+            _cache.popitem(last=False)
+    else:
+        _cache.move_to_end(key)
+    return hit
+
+
+def compute_placements(part: PartModel, **kwargs: Any) -> list[Placement]:
+    """Stable placements of ``part``, most probable first (ids ``0..n-1``).
+
+    Keyword arguments are those of :func:`plan_placements`. Computed once per
+    part and settings, then served from memory (as deep copies).
+    """
+    return [p.model_copy(deep=True) for p in placement_result(part, **kwargs).placements]
+
+
+def clear_cache() -> None:
+    """Forget every cached placement set."""
+    _cache.clear()
