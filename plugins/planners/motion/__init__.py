@@ -1,0 +1,8 @@
+"""Joint-space motion planners on OMPL 2: T-RRT (written here), OMPL's RRTConnect, and time parametrisation.
+
+Modules: :mod:`.space` (OMPL state space and validity from python callables),
+:mod:`.trrt` (Transition-based RRT), :mod:`.ompl_planners` (OMPL's own planners),
+:mod:`.timing` (velocity/acceleration-limited time parametrisation),
+:mod:`.interpolate` (path densification and re-checking), :mod:`.toyworld`
+(joint-space box/sphere worlds for tests and benchmarks).
+"""
