@@ -319,9 +319,13 @@ class HandSpec(StrictModel):
 
     TCP frame: origin midway between the finger pads when closed on an object,
     z along the approach direction (out of the palm, toward the object),
-    y along the jaw axis (finger 0 on -y, finger 1 on +y). The palm and
-    fingers are boxes given as ``(centre xyz, size xyz)`` in the TCP frame at
-    zero opening; each finger moves by +-width/2 along y.
+    y along the jaw axis (finger 0 on -y, finger 1 on +y). The palm is a box
+    (``palm_center``, ``palm_size``) in the TCP frame. Each finger is a box of
+    ``finger_size`` (thickness along y, depth along x, length along z) that
+    hangs from the palm's front face (``z = palm_center.z + palm_size.z / 2``)
+    along +z, centred on x = 0; at opening ``w`` its inner face is at
+    ``y = -+w/2``. The contact pad (``pad_size``: along x, along z) is centred
+    on the TCP's z.
     """
 
     name: str

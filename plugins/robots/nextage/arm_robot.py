@@ -1,0 +1,307 @@
+"""The :class:`Robot` interface on top of pinocchio kinematics, fcl collision and a PyBullet world.
+
+Shared by :class:`~asmteach.plugins.robots.nextage.robot.NextagePyBullet` and
+:class:`~asmteach.plugins.robots.urdf_arm.robot.UrdfArm`; a subclass only says
+where its URDF, arms, gripper and home are. The simulator starts lazily (the
+first :meth:`reset_world`), so planners that only need kinematics and collision
+checking never pay for PyBullet.
+
+Frames: world, z up, metres; ``T_world_tcp`` follows :class:`HandSpec` (z =
+approach out of the palm, y = jaw axis).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+from pydantic import Field
+
+from asmteach.core.errors import UserError
+from asmteach.core.interfaces import IKResult, Obstacle, PartModel, Robot
+from asmteach.core.models import HandSpec, StrictModel, TablePlane, Trajectory
+from asmteach.plugins.robots.nextage.collision import CollisionChecker
+from asmteach.plugins.robots.nextage.kinematics import IKSettings, Kinematics
+from asmteach.plugins.robots.nextage.sim import GripperJoints, PyBulletWorld
+
+__all__ = ["ArmRobot", "ArmRobotSettings", "CameraMount"]
+
+
+class CameraMount(StrictModel):
+    """Where the simulated depth/RGB camera sits (world x, y; z above the table top; metres)."""
+
+    eye: tuple[float, float, float] = Field((1.05, 0.0, 0.75), description="camera position; z above the table top")
+    target: tuple[float, float, float] = Field((0.45, 0.0, 0.0), description="point looked at; z above the table")
+
+
+class ArmRobotSettings(StrictModel):
+    """Settings every simulated arm robot shares (metres, radians, seconds, newtons)."""
+
+    table_height: float = Field(0.0, ge=-2.0, le=2.0, description="world z of the table top")
+    table_center: tuple[float, float] = Field((0.45, 0.0), description="table centre x, y (world)")
+    table_size: tuple[float, float] = Field((0.6, 1.2), description="table extent along x, y")
+    gui: bool = Field(False, description="open PyBullet's window (needs a display)")
+    ik: IKSettings = Field(default_factory=IKSettings)
+    speed_scale: float = Field(1.0, gt=0.0, le=1.0, description="fraction of each joint's speed limit used")
+    jump_tolerance: float = Field(1.05, ge=1.0, description="a trajectory may exceed the speed limits by this factor")
+    start_tolerance: float = Field(0.02, gt=0.0, description="radians between the current q and a trajectory's start")
+    grip_force: float = Field(40.0, gt=0.0, description="finger force, newtons")
+    time_step: float = Field(1.0 / 240.0, gt=0.0, le=0.01, description="physics step, seconds")
+    camera: CameraMount = Field(default_factory=CameraMount)
+
+
+@dataclass
+class ArmSpec:
+    """One arm as the subclass describes it."""
+
+    joints: list[str]
+    tcp_link: str
+    home: np.ndarray
+    gripper: GripperJoints
+    hand_links: list[str]
+
+
+class ArmRobot(Robot):
+    """A robot with named arms, a parallel gripper per arm and a simulated world."""
+
+    Settings = ArmRobotSettings
+    settings: ArmRobotSettings
+
+    def __init__(self, settings: StrictModel | dict | None = None, *, seed: int = 0) -> None:
+        super().__init__(settings, seed=seed)
+        self._ik_rng = self.rng(7)
+        self._sim: PyBulletWorld | None = None
+        self._table = TablePlane(height=self.settings.table_height)
+
+    def _setup(self, urdf, T_world_base: np.ndarray, arms: dict[str, ArmSpec], hand: HandSpec,
+               disabled: Sequence[tuple[str, str]]) -> None:
+        """Called by subclasses once they know their robot."""
+        self.urdf = urdf
+        self.T_world_base = np.asarray(T_world_base, dtype=float)
+        self._arms = arms
+        self._hand = hand
+        self.kin = Kinematics(urdf, {a: (s.joints, s.tcp_link) for a, s in arms.items()}, self.T_world_base,
+                              self.settings.ik, homes={a: s.home for a, s in arms.items()})
+        for a, s in arms.items():
+            self.kin.set_arm(a, s.home)
+            self._set_fingers(a, s.gripper.open_values)
+        self.checker = CollisionChecker(self.kin, disabled=disabled,
+                                        hand_links={a: s.hand_links for a, s in arms.items()})
+        st = self.settings
+        self.checker.set_table(st.table_center, st.table_size, st.table_height)
+
+    def _set_fingers(self, arm: str, values: Sequence[float]) -> None:
+        m = self.kin.model
+        for jn, v in zip(self._arms[arm].gripper.finger_joints, values, strict=True):
+            self.kin.q_full[m.joints[m.getJointId(jn)].idx_q] = float(v)
+
+    # ------------------------------------------------------------ description
+    @property
+    def arms(self) -> list[str]:
+        return list(self._arms)
+
+    @property
+    def hand(self) -> HandSpec:
+        return self._hand
+
+    def _arm(self, arm: str) -> ArmSpec:
+        if arm not in self._arms:
+            raise UserError(f"unknown arm {arm!r}; this robot has {self.arms}")
+        return self._arms[arm]
+
+    def joint_names(self, arm: str) -> list[str]:
+        return list(self._arm(arm).joints)
+
+    def joint_limits(self, arm: str) -> tuple[np.ndarray, np.ndarray]:
+        c = self.kin.chain(arm)
+        return c.lower.copy(), c.upper.copy()
+
+    def speed_limits(self, arm: str) -> np.ndarray:
+        """Joint speed limits (rad/s) used by :meth:`execute`, after ``speed_scale``."""
+        return self.kin.chain(arm).velocity * self.settings.speed_scale
+
+    def home(self, arm: str) -> np.ndarray:
+        return self._arm(arm).home.copy()
+
+    def current(self, arm: str) -> np.ndarray:
+        """The arm's current configuration (simulated when running, else the last one set)."""
+        return self.kin.get_arm(arm)
+
+    def set_configuration(self, arm: str, q: np.ndarray) -> None:
+        """Teleport the arm (kinematic state and simulator); checks the limits."""
+        q = self.kin.check_limits(arm, q)
+        self.kin.set_arm(arm, q)
+        if self._sim is not None:
+            self._sim.set_joints(self.joint_names(arm), q)
+
+    # ------------------------------------------------------------ kinematics
+    def fk(self, arm: str, q: np.ndarray) -> np.ndarray:
+        return self.kin.fk(arm, q)
+
+    def jacobian(self, arm: str, q: np.ndarray) -> np.ndarray:
+        """``(6, dof)`` TCP Jacobian (linear; angular) in world axes."""
+        return self.kin.jacobian(arm, q)
+
+    def ik(self, arm: str, T_world_tcp: np.ndarray, q_seed: np.ndarray | None = None) -> IKResult:
+        if arm not in self._arms:
+            return IKResult(False, None, reason=f"unknown arm {arm!r}; this robot has {self.arms}")
+        return self.kin.ik(arm, T_world_tcp, q_seed if q_seed is not None else self.current(arm), rng=self._ik_rng)
+
+    # ------------------------------------------------------------ collision
+    def set_obstacles(self, obstacles: Sequence[Obstacle]) -> None:
+        self.checker.set_obstacles(obstacles)
+
+    def attach(self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None) -> None:
+        self._arm(arm)
+        self.checker.attach(arm, part, T_tcp_part)
+
+    def in_collision(self, arm: str, qs: np.ndarray, *, ignore: Sequence[str] = ()) -> np.ndarray:
+        self._arm(arm)
+        return self.checker.in_collision(arm, qs, ignore=ignore)
+
+    def clearance(self, arm: str, qs: np.ndarray) -> np.ndarray:
+        self._arm(arm)
+        return self.checker.clearance(arm, qs)
+
+    def collision_report(self, arm: str, q: np.ndarray) -> list[tuple[str, str]]:
+        self._arm(arm)
+        return self.checker.report(arm, q)
+
+    # ------------------------------------------------------------ simulation
+    @property
+    def sim(self) -> PyBulletWorld:
+        """The PyBullet world (started on first use)."""
+        if self._sim is None:
+            self._sim = PyBulletWorld(self.urdf, self.T_world_base, gui=self.settings.gui,
+                                      time_step=self.settings.time_step)
+            for a, s in self._arms.items():
+                self._sim.set_joints(s.joints, self.kin.get_arm(a))
+                self._sim.set_joints(s.gripper.finger_joints, s.gripper.open_values)
+        return self._sim
+
+    def reset_world(self, table: TablePlane, parts: dict[str, tuple[PartModel, np.ndarray]]) -> None:
+        """Fresh world: the table (top at ``table.height``, extent from the settings), the parts, arms at home."""
+        st = self.settings
+        self._table = table
+        self.checker.set_table(st.table_center, st.table_size, table.height)
+        self.checker.held.clear()
+        for a, s in self._arms.items():
+            self.kin.set_arm(a, s.home)
+            self._set_fingers(a, s.gripper.open_values)
+        self.sim.reset_world(st.table_center, st.table_size, table.height, parts)
+        for s in self._arms.values():
+            self.sim.set_joints(s.joints, s.home)
+            self.sim.set_joints(s.gripper.finger_joints, s.gripper.open_values)
+
+    def check_trajectory(self, trajectory: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+        """``(times, positions)`` of a valid trajectory, or :class:`UserError` saying what is wrong."""
+        arm = trajectory.arm
+        names = self.joint_names(arm)
+        if list(trajectory.joint_names) != names:
+            raise UserError(f"trajectory for arm {arm!r} names joints {trajectory.joint_names}; expected {names}")
+        times = np.asarray(trajectory.times, dtype=float)
+        pos = np.atleast_2d(np.asarray(trajectory.positions, dtype=float))
+        if len(times) == 0:
+            raise UserError(f"trajectory for arm {arm!r} is empty")
+        self.kin.check_limits(arm, pos)
+        start_gap = np.abs(pos[0] - self.current(arm))
+        if np.max(start_gap) > self.settings.start_tolerance:
+            k = int(np.argmax(start_gap))
+            raise UserError(f"trajectory for arm {arm!r} starts {start_gap[k]:.3f} rad away from the current "
+                            f"{names[k]}; start it at the current configuration")
+        if len(times) > 1:
+            dt = np.diff(times)
+            dq = np.abs(np.diff(pos, axis=0))
+            limit = self.kin.chain(arm).velocity * self.settings.jump_tolerance
+            need = dq / limit[None]  # seconds each joint needs for each segment
+            bad = need > dt[:, None] + 1e-9
+            if np.any(bad):
+                i, k = (int(v) for v in np.argwhere(bad)[0])
+                raise UserError(f"trajectory for arm {arm!r} jumps: {names[k]} moves {dq[i, k]:.3f} rad in "
+                                f"{dt[i]:.3f} s between waypoints {i} and {i + 1} (limit {limit[k]:.2f} rad/s); "
+                                "re-time it or add waypoints")
+        return times, pos
+
+    def execute(self, trajectory: Trajectory) -> None:
+        """Run the trajectory with position control under the joint speed limits; the arm ends at its last point."""
+        times, pos = self.check_trajectory(trajectory)
+        arm = trajectory.arm
+        names = self.joint_names(arm)
+        sim = self.sim
+        if len(times) == 1:
+            times, pos = np.array([0.0, 0.0]), np.vstack([pos, pos])
+        ids = sim.joint_ids(names)
+        forces = np.array([max(sim.p.getJointInfo(sim.robot, j)[10], 1.0) for j in ids]) * 2.0
+        final = sim.track(names, times, pos, self.speed_limits(arm), forces)
+        self.kin.set_arm(arm, np.clip(final, *self.joint_limits(arm)))
+
+    def grip(self, arm: str, close: bool, part: str | None = None) -> bool:
+        """Close to contact and weld ``part`` to the TCP (True when held), or open and release."""
+        g = self._arm(arm).gripper
+        s = self.sim
+        speed = max(abs(s.p.getJointInfo(s.robot, s.joint_index[g.finger_joints[0]])[11]), 0.05)
+        held = s.grip(arm, g, close, part, self.settings.grip_force, speed)
+        self._set_fingers(arm, s.get_joints(g.finger_joints))
+        if held and part is not None:
+            T_tcp_part = np.linalg.solve(self.fk(arm, self.current(arm)), s.part_pose(part))
+            self.checker.attach(arm, s.parts[part][1], T_tcp_part)
+        elif not close:
+            self.checker.attach(arm, None)
+        return held
+
+    def part_pose(self, name: str) -> np.ndarray:
+        return self.sim.part_pose(name)
+
+    def camera_pose(self) -> np.ndarray:
+        """``T_world_cam`` (OpenCV frame) of the simulated depth and RGB cameras."""
+        from asmteach.plugins.detectors.depth_camera import look_at
+
+        c, h = self.settings.camera, self._table.height
+        return look_at([c.eye[0], c.eye[1], h + c.eye[2]], [c.target[0], c.target[1], h + c.target[2]])
+
+    def _scene_meshes(self) -> list[tuple[trimesh.Trimesh, np.ndarray]]:
+        """Table, parts and the robot's collision primitives at their current world poses."""
+        st = self.settings
+        table = trimesh.creation.box(extents=[st.table_size[0], st.table_size[1], 0.05])
+        T_table = np.eye(4)
+        T_table[:3, 3] = [st.table_center[0], st.table_center[1], self._table.height - 0.025]
+        meshes = [(table, T_table)]
+        for name, (_, part) in self.sim.parts.items():
+            meshes.append((part.mesh, self.sim.part_pose(name)))
+        _, static = self.kin.batch_joint_poses(self.arms[0], self.current(self.arms[0])[None])
+        for g in self.checker.robot:
+            if g.kind == "box":
+                mesh = trimesh.creation.box(extents=2.0 * g.half)
+            elif g.kind == "cylinder":
+                mesh = trimesh.creation.cylinder(radius=g.half[0], height=2.0 * g.half[2], sections=24)
+            else:
+                continue
+            meshes.append((mesh, static[g.joint] @ g.placement @ g.obb))
+        return meshes
+
+    def sense_depth(self) -> tuple[np.ndarray, np.ndarray]:
+        """Kinect-v1 depth ``(480, 640)`` metres (NaN = no return) and the world-frame cloud ``(n, 3)``.
+
+        Uses the project's one depth-camera model
+        (:mod:`asmteach.plugins.detectors.depth_camera`) at :meth:`camera_pose`.
+        """
+        from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings
+
+        if not hasattr(self, "_depth_cam"):
+            self._depth_cam = DepthCamera(KinectSettings(), seed=self.seed)
+        frame = self._depth_cam.render(self._scene_meshes(), self.camera_pose())
+        return frame.depth, frame.points_world
+
+    def sense_rgb(self) -> np.ndarray:
+        """RGB image ``(480, 640, 3) uint8`` from the same camera pose (PyBullet TinyRenderer)."""
+        from asmteach.plugins.detectors.depth_camera import KinectSettings
+
+        k = KinectSettings()
+        return self.sim.rgb(self.camera_pose(), k.width, k.height, k.fx, k.fy, k.cx, k.cy)
+
+    def close(self) -> None:
+        if self._sim is not None:
+            self._sim.close()
+            self._sim = None

@@ -1,0 +1,346 @@
+"""Batch collision checking and clearance for serial arms, with python-fcl and numpy.
+
+The robot's collision geometry comes from its URDF through pinocchio's
+geometry model (boxes, cylinders, spheres, meshes), attached to the joints of
+the pinocchio model. For a batch of ``n`` arm configurations:
+
+1. joint poses for all ``n`` at once (:meth:`Kinematics.batch_joint_poses`, numpy);
+2. every pair that may touch (robot link vs robot link, excluding adjacent and
+   listed pairs; robot vs table and obstacles; held part vs everything but the
+   hand) is pruned by bounding spheres and then tested with the separating-axis
+   test on oriented bounding boxes, vectorised over all ``n x pairs``;
+3. a box's OBB is the box itself, so box-box pairs (the Nextage, the table) are
+   decided exactly by step 2; pairs involving cylinders, meshes (parts) or the
+   held part that survive step 2 go to python-fcl's exact narrow phase.
+
+Frames: world (z up, metres). Clearance is python-fcl's minimum distance.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import fcl
+import numpy as np
+import pinocchio as pin
+import trimesh
+
+from asmteach.core.errors import UserError
+from asmteach.core.interfaces import Obstacle, PartModel
+from asmteach.plugins.robots.nextage.kinematics import Kinematics
+from asmteach.plugins.robots.nextage.urdf_check import resolve_mesh
+
+__all__ = ["CollisionChecker", "obb_overlap"]
+
+
+@dataclass
+class _Geom:
+    """One collision object: OBB in its own frame, fcl geometry, how it is posed."""
+
+    name: str
+    link: str
+    joint: int  # parent joint id (-1: world-fixed obstacle)
+    placement: np.ndarray  # (4, 4) geometry frame in the parent joint frame (or world)
+    obb: np.ndarray  # (4, 4) OBB frame in the geometry frame
+    half: np.ndarray  # (3,) OBB half extents
+    exact: bool  # True when the OBB is the geometry (a box)
+    fcl_geom: object = None
+    fcl_obj: object = None
+    tags: set[str] = field(default_factory=set)
+    kind: str = "box"  # box, cylinder, sphere or mesh
+
+    @property
+    def radius(self) -> float:
+        return float(np.linalg.norm(self.half))
+
+
+def _bvh(mesh: trimesh.Trimesh) -> fcl.BVHModel:
+    m = fcl.BVHModel()
+    v = np.asarray(mesh.vertices, dtype=float)
+    f = np.asarray(mesh.faces, dtype=int)
+    m.beginModel(len(v), len(f))
+    m.addSubModel(v, f)
+    m.endModel()
+    return m
+
+
+def _mesh_geom(name: str, link: str, joint: int, placement: np.ndarray, mesh: trimesh.Trimesh) -> _Geom:
+    obb = mesh.bounding_box_oriented
+    return _Geom(name, link, joint, placement, np.asarray(obb.primitive.transform, dtype=float),
+                 0.5 * np.asarray(obb.primitive.extents, dtype=float), False, _bvh(mesh), kind="mesh")
+
+
+def _box_geom(name: str, link: str, joint: int, placement: np.ndarray, size: np.ndarray) -> _Geom:
+    size = np.asarray(size, dtype=float)
+    return _Geom(name, link, joint, placement, np.eye(4), 0.5 * size, True, fcl.Box(*size))
+
+
+def obb_overlap(cA: np.ndarray, RA: np.ndarray, hA: np.ndarray, cB: np.ndarray, RB: np.ndarray,
+                hB: np.ndarray) -> np.ndarray:
+    """Separating-axis test of oriented boxes, vectorised: True where boxes ``A[k]`` and ``B[k]`` overlap.
+
+    ``c*`` are ``(m, 3)`` centres, ``R*`` ``(m, 3, 3)`` rotations (columns: box axes in
+    the world), ``h*`` ``(m, 3)`` half extents. Touching boxes count as overlapping.
+    """
+    R = np.einsum("mji,mjk->mik", RA, RB)  # B's axes in A's frame
+    t = np.einsum("mji,mj->mi", RA, cB - cA)  # B's centre in A's frame
+    aR = np.abs(R) + 1e-9
+    sep = np.any(np.abs(t) > hA + np.einsum("mij,mj->mi", aR, hB), axis=1)
+    tb = np.einsum("mi,mij->mj", t, R)
+    sep |= np.any(np.abs(tb) > np.einsum("mi,mij->mj", hA, aR) + hB, axis=1)
+    for i in range(3):
+        i1, i2 = (i + 1) % 3, (i + 2) % 3
+        for j in range(3):
+            j1, j2 = (j + 1) % 3, (j + 2) % 3
+            lhs = np.abs(t[:, i2] * R[:, i1, j] - t[:, i1] * R[:, i2, j])
+            rhs = (hA[:, i1] * aR[:, i2, j] + hA[:, i2] * aR[:, i1, j]
+                   + hB[:, j1] * aR[:, i, j2] + hB[:, j2] * aR[:, i, j1])
+            sep |= lhs > rhs
+    return ~sep
+
+
+class CollisionChecker:
+    """Self and world collision of a robot's arms, for planners (batch) and error messages (report).
+
+    Parameters
+    ----------
+    kin : the robot's kinematics (its ``q_full`` gives the joints not being checked).
+    disabled : link-name pairs never checked (adjacent links are added automatically).
+    hand_links : per arm, the links that may touch a held part (gripper body, fingers).
+    """
+
+    def __init__(
+        self,
+        kin: Kinematics,
+        *,
+        disabled: Sequence[tuple[str, str]] = (),
+        hand_links: dict[str, Sequence[str]] | None = None,
+    ) -> None:
+        self.kin = kin
+        self.disabled: set[frozenset[str]] = set(kin.info.adjacent) | {frozenset(p) for p in disabled}
+        self.hand_links = {a: set(v) for a, v in (hand_links or {}).items()}
+        self.robot: list[_Geom] = self._robot_geoms()
+        self.table: _Geom | None = None
+        self.obstacles: list[_Geom] = []
+        self.held: dict[str, _Geom] = {}
+        self._pairs: dict[tuple[str, ...], tuple[list[_Geom], np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    # ------------------------------------------------------------ geometry
+    def _robot_geoms(self) -> list[_Geom]:
+        kin = self.kin
+        try:
+            gm = pin.buildGeomFromUrdf(kin.model, str(kin.urdf), pin.COLLISION, package_dirs=[str(kin.urdf.parent)])
+        except Exception as exc:  # noqa: BLE001 - pinocchio raises plain RuntimeErrors
+            raise UserError(f"{kin.urdf}: cannot read the collision geometry ({exc})") from None
+        out: list[_Geom] = []
+        for go in gm.geometryObjects:
+            link = kin.model.frames[go.parentFrame].name
+            P = go.placement.homogeneous
+            g = go.geometry
+            kind = type(g).__name__
+            name = f"{link}/{go.name}"
+            if kind == "Box":
+                geom = _box_geom(name, link, go.parentJoint, P, 2.0 * np.asarray(g.halfSide))
+            elif kind == "Cylinder":
+                r, h = float(g.radius), 2.0 * float(g.halfLength)
+                geom = _Geom(name, link, go.parentJoint, P, np.eye(4), np.array([r, r, 0.5 * h]), False,
+                             fcl.Cylinder(r, h), kind="cylinder")
+            elif kind == "Sphere":
+                r = float(g.radius)
+                geom = _Geom(name, link, go.parentJoint, P, np.eye(4), np.full(3, r), False, fcl.Sphere(r),
+                             kind="sphere")
+            else:  # a mesh: load it with trimesh (pinocchio resolved the path) and scale it
+                path = resolve_mesh(go.meshPath, kin.urdf.parent)
+                mesh = trimesh.load(path, force="mesh")
+                mesh.apply_scale(np.asarray(go.meshScale, dtype=float))
+                geom = _mesh_geom(name, link, go.parentJoint, P, mesh)
+            geom.fcl_obj = fcl.CollisionObject(geom.fcl_geom, fcl.Transform())
+            out.append(geom)
+        return out
+
+    def set_table(self, center_xy: Sequence[float], size_xy: Sequence[float], height: float,
+                  thickness: float = 0.05) -> None:
+        """The table as a box whose top face is at ``height`` (world z, metres)."""
+        T = np.eye(4)
+        T[:3, 3] = [center_xy[0], center_xy[1], height - 0.5 * thickness]
+        g = _box_geom("table", "table", -1, T, np.array([size_xy[0], size_xy[1], thickness]))
+        g.fcl_obj = fcl.CollisionObject(g.fcl_geom, _tf(T))
+        self.table = g
+        self._pairs.clear()
+
+    def set_obstacles(self, obstacles: Sequence[Obstacle]) -> None:
+        """Replace the static obstacles (meshes at world poses)."""
+        out = []
+        for ob in obstacles:
+            T = np.asarray(ob.T_world, dtype=float)
+            g = _mesh_geom(ob.name, ob.name, -1, T, ob.mesh)
+            g.fcl_obj = fcl.CollisionObject(g.fcl_geom, _tf(T))
+            out.append(g)
+        self.obstacles = out
+        self._pairs.clear()
+
+    def attach(self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None) -> None:
+        """Hold ``part`` at ``T_tcp_part`` in ``arm``'s TCP frame (``None`` releases it)."""
+        chain = self.kin.chain(arm)
+        if part is None:
+            self.held.pop(arm, None)
+        else:
+            if T_tcp_part is None:
+                raise UserError(f"attach({arm!r}, {part.name!r}): T_tcp_part is required")
+            frame = self.kin.model.frames[self.kin.model.getFrameId(chain.tcp_frame)]
+            P = frame.placement.homogeneous @ np.asarray(T_tcp_part, dtype=float)
+            g = _mesh_geom(f"held:{part.name}", f"held:{part.name}", frame.parentJoint, P, part.mesh)
+            g.fcl_obj = fcl.CollisionObject(g.fcl_geom, fcl.Transform())
+            g.tags.add(arm)
+            self.held[arm] = g
+        self._pairs.clear()
+
+    # ------------------------------------------------------------ pairs
+    def _pair_set(self, arm: str, ignore: Sequence[str]) -> tuple[list[_Geom], np.ndarray, np.ndarray, np.ndarray]:
+        """Objects (moving first) and the candidate pairs ``(a, b)`` with an exactness flag, cached."""
+        key = (arm, *sorted(ignore))
+        if key in self._pairs:
+            return self._pairs[key]
+        moving_j = set(self.kin.moving_joints(arm))
+        moving = [g for g in self.robot if g.joint in moving_j]
+        static = [g for g in self.robot if g.joint not in moving_j]
+        # a part held by another arm is an obstacle that moves with that arm
+        static += [g for a, g in self.held.items() if a != arm]
+        held = self.held.get(arm)
+        if held is not None:
+            moving.append(held)
+        world = ([self.table] if self.table is not None else []) + self.obstacles
+        objs = moving + static + world
+        idx = {id(g): k for k, g in enumerate(objs)}
+        hand = self.hand_links.get(arm, set())
+        pa: list[int] = []
+        pb: list[int] = []
+        for i, a in enumerate(moving):
+            for b in objs[i + 1:]:
+                if a is held:
+                    if b.link in hand or (b.joint == -1 and b.name in ignore):
+                        continue
+                elif b is held:
+                    if a.link in hand:
+                        continue
+                elif a.link == b.link or frozenset((a.link, b.link)) in self.disabled:
+                    continue
+                pa.append(i)
+                pb.append(idx[id(b)])
+        A, B = np.array(pa, dtype=int), np.array(pb, dtype=int)
+        exact = np.array([objs[a].exact and objs[b].exact for a, b in zip(pa, pb, strict=True)], dtype=bool)
+        self._pairs[key] = (objs, A, B, exact)
+        return self._pairs[key]
+
+    def _poses(self, arm: str, qs: np.ndarray, objs: list[_Geom]) -> np.ndarray:
+        """World poses of every object's geometry frame: ``(n, len(objs), 4, 4)``."""
+        moving, static = self.kin.batch_joint_poses(arm, qs)
+        n = qs.shape[0]
+        out = np.empty((n, len(objs), 4, 4))
+        for k, g in enumerate(objs):
+            if g.joint < 0:
+                out[:, k] = g.placement
+            elif g.joint in moving:
+                out[:, k] = moving[g.joint] @ g.placement
+            else:
+                out[:, k] = static[g.joint] @ g.placement
+        return out
+
+    # ------------------------------------------------------------ queries
+    def _hits(self, arm: str, qs: np.ndarray, ignore: Sequence[str], stop_early: bool = True) -> tuple[
+            list[_Geom], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Contacts for ``n`` configurations: ``(objs, poses, config index, pair index, hit)``."""
+        objs, A, B, exact = self._pair_set(arm, ignore)
+        n = qs.shape[0]
+        poses = self._poses(arm, qs, objs)
+        half = np.stack([g.half for g in objs])
+        rad = np.linalg.norm(half, axis=1)
+        W = poses @ np.stack([g.obb for g in objs])[None]  # OBB frames in the world, (n, objs, 4, 4)
+        # bounding-sphere prune in float32 (a 1e-3 m slack covers its rounding)
+        cT = np.ascontiguousarray(W[:, :, :3, 3].transpose(1, 0, 2), dtype=np.float32)  # (objs, n, 3)
+        diff = cT[A] - cT[B]  # (pairs, n, 3)
+        d2 = diff[..., 0] ** 2 + diff[..., 1] ** 2 + diff[..., 2] ** 2
+        pi, ci = np.nonzero(d2 <= ((rad[A] + rad[B] + 1e-3) ** 2).astype(np.float32)[:, None])
+        if len(ci) == 0:
+            return objs, poses, ci, pi, np.zeros(0, dtype=bool)
+        a, b = A[pi], B[pi]
+        over = obb_overlap(W[ci, a, :3, 3], W[ci, a, :3, :3], half[a], W[ci, b, :3, 3], W[ci, b, :3, :3], half[b])
+        ci, pi = ci[over], pi[over]
+        # Cylinders: also test their OBB turned by 30 and 60 deg about the axis (a 12-gon prism around the
+        # cylinder); separation from any of these proves the pair apart.
+        cyl = np.array([g.kind == "cylinder" for g in objs])
+        for ang in (np.pi / 6.0, np.pi / 3.0):
+            sel = cyl[A[pi]] | cyl[B[pi]]
+            if not np.any(sel):
+                break
+            Rz = np.eye(4)
+            Rz[:2, :2] = [[np.cos(ang), -np.sin(ang)], [np.sin(ang), np.cos(ang)]]
+            a, b, cs = A[pi[sel]], B[pi[sel]], ci[sel]
+            Wa, Wb = W[cs, a], W[cs, b]
+            Wa = np.where(cyl[a][:, None, None], Wa @ Rz, Wa)
+            Wb = np.where(cyl[b][:, None, None], Wb @ Rz, Wb)
+            keep = np.ones(len(ci), dtype=bool)
+            keep[np.nonzero(sel)[0]] = obb_overlap(Wa[:, :3, 3], Wa[:, :3, :3], half[a], Wb[:, :3, 3], Wb[:, :3, :3],
+                                                   half[b])
+            ci, pi = ci[keep], pi[keep]
+        hit = exact[pi].copy()
+        done = np.zeros(n, dtype=bool)
+        done[ci[hit]] = True
+        req = fcl.CollisionRequest()
+        for k in np.nonzero(~hit)[0]:
+            if stop_early and done[ci[k]]:
+                continue  # this configuration is already known to collide
+            ga, gb = objs[A[pi[k]]], objs[B[pi[k]]]
+            ga.fcl_obj.setTransform(_tf(poses[ci[k], A[pi[k]]]))
+            gb.fcl_obj.setTransform(_tf(poses[ci[k], B[pi[k]]]))
+            hit[k] = fcl.collide(ga.fcl_obj, gb.fcl_obj, req, fcl.CollisionResult()) > 0
+            done[ci[k]] |= hit[k]
+        return objs, poses, ci, pi, hit
+
+    def in_collision(self, arm: str, qs: np.ndarray, *, ignore: Sequence[str] = ()) -> np.ndarray:
+        """``(n, dof)`` configurations -> ``(n,)`` bool, True where anything touches.
+
+        ``ignore`` names obstacles the held part may touch (e.g. the part it is placed on).
+        """
+        qs = np.atleast_2d(self.kin.check_limits(arm, qs))
+        out = np.zeros(qs.shape[0], dtype=bool)
+        if qs.shape[0] == 0:
+            return out
+        _, _, ci, _, hit = self._hits(arm, qs, ignore)
+        out[ci[hit]] = True
+        return out
+
+    def report(self, arm: str, q: np.ndarray, *, ignore: Sequence[str] = ()) -> list[tuple[str, str]]:
+        """Pairs ``(robot link or held part, other link or obstacle)`` in contact at ``q``."""
+        qs = np.atleast_2d(self.kin.check_limits(arm, q))
+        objs, A, B, _ = self._pair_set(arm, ignore)
+        _, _, _, pi, hit = self._hits(arm, qs, ignore, stop_early=False)
+        pairs = [(objs[A[p]].link, objs[B[p]].link) for p in pi[hit]]
+        return sorted(set(pairs))
+
+    def clearance(self, arm: str, qs: np.ndarray) -> np.ndarray:
+        """``(n,)`` minimum distance (metres, 0 when touching) from the moving robot geometry and the
+        held part to the table and the obstacles."""
+        qs = np.atleast_2d(self.kin.check_limits(arm, qs))
+        objs, _, _, _ = self._pair_set(arm, ())
+        moving_j = set(self.kin.moving_joints(arm))
+        mov = [k for k, g in enumerate(objs) if g.joint in moving_j and g.joint >= 0]
+        world = [k for k, g in enumerate(objs) if g.joint < 0]
+        poses = self._poses(arm, qs, objs)
+        out = np.full(qs.shape[0], np.inf)
+        req = fcl.DistanceRequest()
+        for i in range(qs.shape[0]):
+            for k in mov:
+                objs[k].fcl_obj.setTransform(_tf(poses[i, k]))
+            best = np.inf
+            for k in mov:
+                for w in world:
+                    dist = fcl.distance(objs[k].fcl_obj, objs[w].fcl_obj, req, fcl.DistanceResult())
+                    best = min(best, max(0.0, float(dist)))
+            out[i] = best
+        return out
+
+
+def _tf(T: np.ndarray) -> fcl.Transform:
+    return fcl.Transform(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]))

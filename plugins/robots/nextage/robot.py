@@ -1,0 +1,93 @@
+"""The Kawada NEXTAGE OPEN in PyBullet, with pinocchio kinematics and fcl collision checking.
+
+World frame: z up, metres. The table top is at world z = ``table_height``;
+the WAIST (the robot's root: x forward, y left, z up) sits
+``waist_above_table`` above it at world x = y = 0 by default, so the table
+(x 0.15..0.75 by default) is in front of the robot along +x. With the default
+0.17 m the table top is 0.80 m above the floor of the Kawada model (the WAIST
+is 0.97 m above it), a little below the fingertips at the upstream init pose.
+Give ``base_pose`` to place the WAIST anywhere else.
+
+Arms ``"left"`` and ``"right"``: ``LARM_JOINT0..5`` / ``RARM_JOINT0..5``,
+with ``use_chest: true`` preceded by ``CHEST_JOINT0`` (7 DOF; moving the
+chest moves both arms). The TCP is ``*ARM_TCP_Link`` of the two-finger
+gripper (see :mod:`asmteach.plugins.robots.nextage.hand`). Home is the
+upstream init pose ("goInitial").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydantic import Field
+
+from asmteach.core import geometry
+from asmteach.core.models import Mat4
+from asmteach.plugins.robots.nextage.arm_robot import ArmRobot, ArmRobotSettings, ArmSpec
+from asmteach.plugins.robots.nextage.build_urdf import GRIPPER, URDF_PATH
+from asmteach.plugins.robots.nextage.hand import nextage_hand
+from asmteach.plugins.robots.nextage.sim import GripperJoints
+
+__all__ = ["INIT_POSE", "SRDF_DISABLED", "NextagePyBullet"]
+
+INIT_POSE = {
+    "left": np.radians([0.6, 0.0, -100.0, -15.2, 9.4, -3.2]),
+    "right": np.radians([-0.6, 0.0, -100.0, 15.2, 9.4, 3.2]),
+}
+"""Upstream init pose ("goInitial", SRDF init_rtm), radians."""
+
+_PREFIX = {"left": "LARM", "right": "RARM"}
+
+
+def _srdf_disabled() -> list[tuple[str, str]]:
+    """Link pairs never checked: NextageOpen.srdf's Default and Never lists, plus each hand's two fingers."""
+    pairs = [("CHEST_JOINT0_Link", "HEAD_JOINT1_Link")]
+    for k in range(4):
+        pairs += [("HEAD_JOINT0_Link", f"LARM_JOINT{k}_Link"), ("HEAD_JOINT0_Link", f"RARM_JOINT{k}_Link")]
+    pairs += [("HEAD_JOINT0_Link", "WAIST"), ("HEAD_JOINT1_Link", "LARM_JOINT0_Link"),
+              ("HEAD_JOINT1_Link", "RARM_JOINT0_Link"), ("HEAD_JOINT1_Link", "WAIST")]
+    for s in ("LARM", "RARM"):
+        pairs += [(f"{s}_JOINT0_Link", f"{s}_JOINT2_Link"), (f"{s}_JOINT0_Link", f"{s}_JOINT3_Link"),
+                  (f"{s}_JOINT1_Link", f"{s}_JOINT3_Link"), (f"{s}_JOINT2_Link", f"{s}_JOINT4_Link"),
+                  (f"{s}_FINGER0_Link", f"{s}_FINGER1_Link")]
+    pairs += [("LARM_JOINT0_Link", f"RARM_JOINT{k}_Link") for k in range(4)]
+    pairs += [("RARM_JOINT0_Link", f"LARM_JOINT{k}_Link") for k in range(1, 4)]
+    return pairs
+
+
+SRDF_DISABLED = _srdf_disabled()
+
+
+class NextageSettings(ArmRobotSettings):
+    """Settings of the simulated Nextage (metres, radians)."""
+
+    waist_above_table: float = Field(0.17, ge=-0.5, le=1.0, description="WAIST height above the table top")
+    base_pose: Mat4 | None = Field(None, description="T_world_waist; default: (0, 0, table_height + waist_above_table)")
+    use_chest: bool = Field(False, description="arms include CHEST_JOINT0 (7 DOF)")
+
+
+class NextagePyBullet(ArmRobot):
+    """Kawada NEXTAGE OPEN: two 6-DOF arms (7 with the chest), two-finger grippers, PyBullet world."""
+
+    Settings = NextageSettings
+    settings: NextageSettings
+
+    def __init__(self, settings: NextageSettings | dict | None = None, *, seed: int = 0) -> None:
+        super().__init__(settings, seed=seed)
+        st = self.settings
+        if st.base_pose is not None:
+            T = np.asarray(st.base_pose, dtype=float)
+        else:
+            T = geometry.from_rpy(0.0, 0.0, 0.0, (0.0, 0.0, st.table_height + st.waist_above_table))
+        arms = {}
+        for arm, pre in _PREFIX.items():
+            joints = [f"{pre}_JOINT{k}" for k in range(6)]
+            home = INIT_POSE[arm]
+            if st.use_chest:
+                joints = ["CHEST_JOINT0", *joints]
+                home = np.concatenate([[0.0], home])
+            half = 0.5 * GRIPPER.max_opening
+            gripper = GripperJoints([f"{pre}_FINGER0_JOINT", f"{pre}_FINGER1_JOINT"], [half, half], [0.0, 0.0],
+                                    f"{pre}_TCP_Link", [f"{pre}_FINGER0_Link", f"{pre}_FINGER1_Link"])
+            arms[arm] = ArmSpec(joints, f"{pre}_TCP_Link", home, gripper,
+                                [f"{pre}_GRIPPER_Link", f"{pre}_FINGER0_Link", f"{pre}_FINGER1_Link"])
+        self._setup(URDF_PATH, T, arms, nextage_hand(st.grip_force), SRDF_DISABLED)

@@ -1,0 +1,299 @@
+"""A PyBullet world for one robot: table, parts, trajectory execution, gripping, cameras.
+
+One PyBullet client per instance (``bullet_client.BulletClient``), never the
+global one, so several robots can live in one process. Headless (DIRECT) by
+default; GUI when asked and a display exists.
+
+Parts are spawned from their trimesh meshes: a convex part gets one convex
+hull (PyBullet builds it from the vertices); a concave part is decomposed with
+PyBullet's built-in V-HACD (``p.vhacd``) into convex pieces, loaded as one
+compound collision shape from the decomposition's OBJ file. The visual shape
+is always the exact mesh.
+
+Poses: ``T_world_part`` is the part frame (its mesh frame), not PyBullet's
+centre-of-mass frame; the conversion is done here. Units: metres, radians,
+seconds, newtons.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pybullet
+from pybullet_utils import bullet_client
+
+from asmteach.core import geometry
+from asmteach.core.errors import UserError
+from asmteach.core.interfaces import PartModel
+
+__all__ = ["GripperJoints", "PyBulletWorld"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class GripperJoints:
+    """A parallel gripper in the simulator: finger joints, their open/closed values and the TCP link."""
+
+    finger_joints: list[str]
+    open_values: list[float]
+    closed_values: list[float]
+    tcp_link: str
+    finger_links: list[str]
+
+
+def _pose_to_pb(T: np.ndarray) -> tuple[list[float], list[float]]:
+    return T[:3, 3].tolist(), geometry.to_quat(T).tolist()
+
+
+def _pb_to_pose(pos: tuple[float, ...], orn: tuple[float, ...]) -> np.ndarray:
+    return geometry.from_quat(orn, pos)
+
+
+class PyBulletWorld:
+    """The simulated robot and its world.
+
+    Parameters
+    ----------
+    urdf : robot URDF; loaded with a fixed base at ``T_world_base``.
+    gui : open PyBullet's window (needs a display; falls back to headless).
+    time_step : physics step, seconds.
+    """
+
+    def __init__(self, urdf: Path, T_world_base: np.ndarray, *, gui: bool = False, time_step: float = 1.0 / 240.0):
+        mode = pybullet.DIRECT
+        if gui:
+            if os.environ.get("DISPLAY") or os.name == "nt":
+                mode = pybullet.GUI
+            else:
+                log.warning("gui: true but no display; running PyBullet headless")
+        self.p = bullet_client.BulletClient(connection_mode=mode)
+        self.time_step = float(time_step)
+        self.p.setTimeStep(self.time_step)
+        self.p.setGravity(0.0, 0.0, -9.81)
+        self.T_world_base = np.asarray(T_world_base, dtype=float)
+        pos, orn = _pose_to_pb(self.T_world_base)
+        flags = pybullet.URDF_USE_INERTIA_FROM_FILE
+        try:
+            self.robot = self.p.loadURDF(str(urdf), pos, orn, useFixedBase=True, flags=flags)
+        except pybullet.error as exc:
+            raise UserError(f"{urdf}: PyBullet cannot load it ({exc})") from None
+        self.joint_index: dict[str, int] = {}
+        self.link_index: dict[str, int] = {self.p.getBodyInfo(self.robot)[0].decode(): -1}
+        for j in range(self.p.getNumJoints(self.robot)):
+            info = self.p.getJointInfo(self.robot, j)
+            self.joint_index[info[1].decode()] = j
+            self.link_index[info[12].decode()] = j
+        self.table_id: int | None = None
+        self.parts: dict[str, tuple[int, PartModel]] = {}
+        self.constraints: dict[str, tuple[int, str]] = {}  # arm -> (constraint id, part name)
+        self._tmp = tempfile.TemporaryDirectory(prefix="asmteach-pb-")
+        self._vhacd_cache: dict[str, str] = {}
+
+    # ------------------------------------------------------------ robot state
+    def joint_ids(self, names: list[str]) -> list[int]:
+        try:
+            return [self.joint_index[n] for n in names]
+        except KeyError as exc:
+            raise UserError(f"the simulated robot has no joint {exc.args[0]!r}") from None
+
+    def set_joints(self, names: list[str], q: np.ndarray) -> None:
+        """Teleport joints (no dynamics) and hold them there."""
+        ids = self.joint_ids(names)
+        for j, v in zip(ids, np.asarray(q, dtype=float), strict=True):
+            self.p.resetJointState(self.robot, j, float(v), 0.0)
+        self.p.setJointMotorControlArray(self.robot, ids, pybullet.POSITION_CONTROL, targetPositions=list(q))
+
+    def get_joints(self, names: list[str]) -> np.ndarray:
+        ids = self.joint_ids(names)
+        return np.array([s[0] for s in self.p.getJointStates(self.robot, ids)])
+
+    def link_pose(self, link: str) -> np.ndarray:
+        """World pose of a URDF link frame (``computeForwardKinematics``)."""
+        if link not in self.link_index:
+            raise UserError(f"the simulated robot has no link {link!r}")
+        idx = self.link_index[link]
+        if idx < 0:
+            return self.T_world_base.copy()  # the fixed base never moves
+        st = self.p.getLinkState(self.robot, idx, computeForwardKinematics=True)
+        return _pb_to_pose(st[4], st[5])
+
+    # ------------------------------------------------------------ world
+    def reset_world(self, table_center: tuple[float, float], table_size: tuple[float, float], table_height: float,
+                    parts: dict[str, tuple[PartModel, np.ndarray]], thickness: float = 0.05) -> None:
+        """Remove the old table, parts and grasps; add the table (top at ``table_height``) and the parts."""
+        for cid, _ in self.constraints.values():
+            self.p.removeConstraint(cid)
+        self.constraints.clear()
+        for body, _ in self.parts.values():
+            self.p.removeBody(body)
+        self.parts.clear()
+        if self.table_id is not None:
+            self.p.removeBody(self.table_id)
+        half = [0.5 * table_size[0], 0.5 * table_size[1], 0.5 * thickness]
+        col = self.p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
+        vis = self.p.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=[0.55, 0.45, 0.35, 1.0])
+        self.table_id = self.p.createMultiBody(0.0, col, vis, [table_center[0], table_center[1],
+                                                               table_height - 0.5 * thickness])
+        self.p.changeDynamics(self.table_id, -1, lateralFriction=0.8)
+        for name, (part, T) in parts.items():
+            self.spawn_part(name, part, T)
+
+    def _collision_shape(self, part: PartModel) -> int:
+        mesh = part.mesh
+        if mesh.is_convex:
+            return self.p.createCollisionShape(pybullet.GEOM_MESH, vertices=np.asarray(mesh.vertices).tolist())
+        key = part.source_hash or str(id(mesh))
+        if key not in self._vhacd_cache:
+            src = Path(self._tmp.name) / f"{key}.obj"
+            out = Path(self._tmp.name) / f"{key}_vhacd.obj"
+            mesh.export(src)
+            # Small parts need a fine voxel grid to keep holes and slots open.
+            self.p.vhacd(str(src), str(out), str(Path(self._tmp.name) / "vhacd.log"), resolution=200000,
+                         concavity=0.0005, maxNumVerticesPerCH=64, minVolumePerCH=1e-7)
+            self._vhacd_cache[key] = str(out)
+        return self.p.createCollisionShape(pybullet.GEOM_MESH, fileName=self._vhacd_cache[key])
+
+    def spawn_part(self, name: str, part: PartModel, T_world_part: np.ndarray) -> int:
+        """Add ``part`` at ``T_world_part`` (its mesh frame), with its mass and centre of mass."""
+        T = geometry.as_transform(T_world_part)
+        col = self._collision_shape(part)
+        v = np.asarray(part.mesh.vertices)
+        vis = self.p.createVisualShape(pybullet.GEOM_MESH, vertices=v.tolist(),
+                                       indices=np.asarray(part.mesh.faces).reshape(-1).tolist(),
+                                       rgbaColor=[*part.spec.color, 1.0])
+        pos, orn = _pose_to_pb(T)
+        body = self.p.createMultiBody(part.mass, col, vis, pos, orn,
+                                      baseInertialFramePosition=np.asarray(part.center_of_mass).tolist())
+        self.p.changeDynamics(body, -1, lateralFriction=1.0, spinningFriction=0.002, rollingFriction=0.0005)
+        self.parts[name] = (body, part)
+        return body
+
+    def part_pose(self, name: str) -> np.ndarray:
+        """``T_world_part`` of a spawned part (mesh frame)."""
+        if name not in self.parts:
+            raise UserError(f"no part named {name!r} in the simulated world (have {sorted(self.parts)})")
+        body, part = self.parts[name]
+        pos, orn = self.p.getBasePositionAndOrientation(body)
+        T_com = _pb_to_pose(pos, orn)  # PyBullet reports the centre-of-mass frame
+        T_part_com = np.eye(4)
+        T_part_com[:3, 3] = part.center_of_mass
+        return T_com @ np.linalg.inv(T_part_com)
+
+    # ------------------------------------------------------------ motion
+    def step(self, n: int = 1) -> None:
+        for _ in range(n):
+            self.p.stepSimulation()
+
+    def track(self, names: list[str], times: np.ndarray, positions: np.ndarray, speed: np.ndarray,
+              forces: np.ndarray, settle: float = 0.5, tol: float = 2e-3) -> np.ndarray:
+        """Follow a time-parametrised path with position control, capped at ``speed`` (rad/s).
+
+        The path is sampled at every physics step (linear between waypoints);
+        after its end the controller gets up to ``settle`` seconds to reach the
+        last waypoint within ``tol`` radians. Returns the final joint positions.
+        """
+        ids = self.joint_ids(names)
+        t_end = float(times[-1] - times[0])
+        n_steps = max(1, int(np.ceil(t_end / self.time_step)))
+        for k in range(1, n_steps + 1):
+            t = times[0] + min(k * self.time_step, t_end)
+            target = np.array([np.interp(t, times, positions[:, i]) for i in range(len(ids))])
+            for i, j in enumerate(ids):
+                self.p.setJointMotorControl2(self.robot, j, pybullet.POSITION_CONTROL, targetPosition=float(target[i]),
+                                             force=float(forces[i]), maxVelocity=float(speed[i]))
+            self.p.stepSimulation()
+        goal = positions[-1]
+        for _ in range(int(settle / self.time_step)):
+            if np.max(np.abs(self.get_joints(names) - goal)) < tol:
+                break
+            self.p.stepSimulation()
+        return self.get_joints(names)
+
+    # ------------------------------------------------------------ gripper
+    def grip(self, arm: str, g: GripperJoints, close: bool, part: str | None, force: float, speed: float,
+             max_time: float = 1.5) -> bool:
+        """Close the fingers until they touch ``part`` (then weld it to the TCP) or open and release."""
+        ids = self.joint_ids(g.finger_joints)
+        if not close:
+            if arm in self.constraints:
+                self.p.removeConstraint(self.constraints.pop(arm)[0])
+            for j, v in zip(ids, g.open_values, strict=True):
+                self.p.setJointMotorControl2(self.robot, j, pybullet.POSITION_CONTROL, targetPosition=v, force=force,
+                                             maxVelocity=speed)
+            for _ in range(int(max_time / self.time_step)):
+                self.p.stepSimulation()
+                if np.allclose(self.get_joints(g.finger_joints), g.open_values, atol=1e-3):
+                    break
+            return False
+        body = None
+        if part is not None:
+            if part not in self.parts:
+                raise UserError(f"grip: no part named {part!r} in the simulated world (have {sorted(self.parts)})")
+            body = self.parts[part][0]
+        finger_idx = [self.link_index[ln] for ln in g.finger_links]
+        for j, v in zip(ids, g.closed_values, strict=True):
+            self.p.setJointMotorControl2(self.robot, j, pybullet.POSITION_CONTROL, targetPosition=v, force=force,
+                                         maxVelocity=speed)
+        touching = False
+        prev = self.get_joints(g.finger_joints)
+        for k in range(int(max_time / self.time_step)):
+            self.p.stepSimulation()
+            if body is not None:
+                touching = all(self.p.getContactPoints(self.robot, body, fi, -1) for fi in finger_idx)
+                if touching:
+                    break
+            now = self.get_joints(g.finger_joints)
+            if k > 10 and np.max(np.abs(now - prev)) < 1e-6:
+                break  # the fingers stopped (closed or blocked)
+            prev = now
+        if body is None or not touching:
+            return False
+        # Hold the fingers where they touched and weld the part to the TCP so it cannot slip.
+        for j, v in zip(ids, self.get_joints(g.finger_joints), strict=True):
+            self.p.setJointMotorControl2(self.robot, j, pybullet.POSITION_CONTROL, targetPosition=float(v),
+                                         force=force, maxVelocity=speed)
+        T_world_tcp = self.link_pose(g.tcp_link)
+        pos, orn = self.p.getBasePositionAndOrientation(body)
+        T_tcp_com = np.linalg.solve(T_world_tcp, _pb_to_pose(pos, orn))
+        p_rel, q_rel = _pose_to_pb(T_tcp_com)
+        # The TCP link's inertial frame is its link frame (URDF inertial origin at 0), as createConstraint expects.
+        cid = self.p.createConstraint(self.robot, self.link_index[g.tcp_link], body, -1, pybullet.JOINT_FIXED,
+                                      [0, 0, 0], p_rel, [0, 0, 0], parentFrameOrientation=q_rel)
+        self.p.changeConstraint(cid, maxForce=10000.0)
+        self.constraints[arm] = (cid, part or "")
+        return True
+
+    # ------------------------------------------------------------ cameras
+    def rgb(self, T_world_cam: np.ndarray, width: int, height: int, fx: float, fy: float, cx: float, cy: float,
+            near: float = 0.05, far: float = 5.0) -> np.ndarray:
+        """RGB image ``(h, w, 3) uint8`` with TinyRenderer from an OpenCV-frame camera pose."""
+        eye = T_world_cam[:3, 3]
+        fwd = T_world_cam[:3, 2]
+        up = -T_world_cam[:3, 1]
+        view = self.p.computeViewMatrix(eye.tolist(), (eye + fwd).tolist(), up.tolist())
+        # OpenGL projection from the pinhole intrinsics
+        proj = np.zeros((4, 4))
+        proj[0, 0] = 2.0 * fx / width
+        proj[1, 1] = 2.0 * fy / height
+        proj[0, 2] = 1.0 - 2.0 * cx / width
+        proj[1, 2] = 2.0 * cy / height - 1.0
+        proj[2, 2] = -(far + near) / (far - near)
+        proj[2, 3] = -2.0 * far * near / (far - near)
+        proj[3, 2] = -1.0
+        img = self.p.getCameraImage(width, height, view, proj.T.reshape(-1).tolist(),
+                                    renderer=pybullet.ER_TINY_RENDERER)
+        rgba = np.reshape(np.asarray(img[2], dtype=np.uint8), (height, width, 4))
+        return rgba[:, :, :3].copy()
+
+    def close(self) -> None:
+        try:
+            self.p.disconnect()
+        except pybullet.error:
+            pass
+        self._tmp.cleanup()

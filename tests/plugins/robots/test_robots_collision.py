@@ -1,0 +1,84 @@
+"""Self and world collisions of the Nextage: known contacts, free home, parts, held part, clearance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from asmteach.core.interfaces import Obstacle, PartModel
+from asmteach.core.models import PartSpec, Primitive, SolidSpec
+from asmteach.plugins.robots.nextage.robot import NextagePyBullet
+
+
+@pytest.fixture()
+def robot() -> NextagePyBullet:
+    with NextagePyBullet({}) as r:
+        yield r
+
+
+def test_home_is_free_and_known_contacts_are_found(robot: NextagePyBullet) -> None:
+    for arm in robot.arms:
+        assert not robot.in_collision(arm, robot.home(arm)[None])[0]
+    # all-zero: the hand is inside the upper stand of the WAIST (facts, section 8)
+    pairs = robot.collision_report("left", np.zeros(6))
+    assert ("LARM_JOINT4_Link", "WAIST") in pairs and ("LARM_JOINT5_Link", "WAIST") in pairs
+    # NextageClient off pose: upper arm against the shoulder cap of the chest
+    off = np.radians([-25.0, -140.0, -150.0, -45.0, 0.0, 0.0])
+    off[1] = robot.joint_limits("left")[0][1]
+    assert ("LARM_JOINT1_Link", "CHEST_JOINT0_Link") in robot.collision_report("left", off)
+    assert robot.in_collision("left", np.stack([robot.home("left"), np.zeros(6), off])).tolist() == [False, True, True]
+
+
+def test_table_and_parts(robot: NextagePyBullet) -> None:
+    q = robot.home("left")
+    T = robot.fk("left", q)
+    low = T.copy()
+    low[2, 3] = -0.01  # fingertips 2.75 cm under the table top
+    res = robot.ik("left", low, q)
+    assert res.success
+    assert ("LARM_FINGER0_Link", "table") in robot.collision_report("left", res.q)
+    # the open jaw (85 mm) clears a 30 mm cube at the TCP; a 100 mm cube hits the fingers
+    T_cube = np.eye(4)
+    T_cube[:3, 3] = T[:3, 3]
+    robot.set_obstacles([Obstacle("cube", trimesh.creation.box((0.03, 0.03, 0.03)), T_cube)])
+    assert not robot.in_collision("left", q[None])[0]
+    robot.set_obstacles([Obstacle("cube", trimesh.creation.box((0.1, 0.1, 0.03)), T_cube)])
+    pairs = robot.collision_report("left", q)
+    assert ("LARM_FINGER0_Link", "cube") in pairs and ("LARM_FINGER1_Link", "cube") in pairs
+    T_cube[:3, 3] += [0.0, -0.4, 0.0]
+    robot.set_obstacles([Obstacle("cube", trimesh.creation.box((0.1, 0.1, 0.03)), T_cube)])
+    assert not robot.in_collision("left", q[None])[0]
+
+
+def test_held_part_collides_with_the_table_unless_ignored(robot: NextagePyBullet) -> None:
+    spec = PartSpec(name="bar", solid=SolidSpec(add=[Primitive(shape="box", size=[0.02, 0.02, 0.3])]))
+    mesh = trimesh.creation.box((0.02, 0.02, 0.3))
+    part = PartModel(spec=spec, mesh=mesh, mass=0.1, center_of_mass=np.zeros(3))
+    q = robot.home("left")
+    assert not robot.in_collision("left", q[None])[0]
+    T_tcp_part = np.eye(4)
+    T_tcp_part[2, 3] = 0.12  # a 30 cm bar held near its top end, pointing down into the table
+    robot.attach("left", part, T_tcp_part)
+    assert robot.in_collision("left", q[None])[0]
+    assert ("held:bar", "table") in robot.collision_report("left", q)
+    assert not robot.in_collision("left", q[None], ignore=["table"])[0]
+    robot.attach("left", None)
+    assert not robot.in_collision("left", q[None])[0]
+
+
+def test_batch_equals_single_and_clearance(robot: NextagePyBullet) -> None:
+    rng = np.random.default_rng(2)
+    lo, hi = robot.joint_limits("right")
+    qs = rng.uniform(lo, hi, size=(60, 6))
+    batch = robot.in_collision("right", qs)
+    single = np.array([robot.in_collision("right", q[None])[0] for q in qs])
+    assert np.array_equal(batch, single) and 0 < batch.sum() < len(qs)
+    home = robot.home("right")
+    c = robot.clearance("right", home[None])[0]
+    T = robot.fk("right", home)
+    # the fingertips are the lowest point: 0.0175 m beyond the TCP along the approach axis
+    assert c == pytest.approx(T[2, 3] - 0.0175, abs=2e-3)
+    lower = home.copy()
+    lower[4] += 0.1
+    assert robot.clearance("right", lower[None])[0] != pytest.approx(c, abs=1e-6)
