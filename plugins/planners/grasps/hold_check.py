@@ -1,0 +1,280 @@
+"""Physical hold check in PyBullet: close, lift 10 cm, hold 2 s under a light shake.
+
+The gripper is built from the :class:`HandSpec`: a palm box (the multibody's
+base, its frame is the TCP frame) and two finger links on prismatic joints
+along the TCP y axis (coupled by a gear constraint, so they close symmetrically),
+each a finger box with a 1 mm pad box on its inner face.
+The palm is driven kinematically through a constraint to the world (as a
+robot arm would hold it); the part is a free dynamic body held by friction
+alone: no constraint ever ties it to the gripper.
+
+Sequence (world frame, z up, metres, seconds): the grasp is placed top-down
+(TCP z along world -z) with the part in the air and gravity off; the fingers
+close with ``hand.max_force`` newtons each; gravity is switched on; the palm
+lifts ``lift`` metres in 1 s, then holds for ``hold`` seconds while shaking
+horizontally (``shake_amplitude`` metres at ``shake_hz``). The grasp *holds*
+when the part rose with the palm (at least 80 % of the lift) and both fingers
+still touch it at the end. Bullet multiplies the friction coefficients of
+two touching bodies; the part gets 1.0, so ``friction`` is the pad-part value
+(and the pads' torsional friction follows from it and the pad size).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet
+
+from asmteach.core import geometry
+from asmteach.core.interfaces import PartModel
+from asmteach.core.models import Grasp, HandSpec
+from asmteach.plugins.planners.grasps.convex import convex_pieces
+from asmteach.plugins.planners.grasps.hand_geometry import hand_boxes
+
+__all__ = ["HoldResult", "HoldSimulator"]
+
+_PAD_THICKNESS = 0.001
+_CLOSE_S = 0.6
+_SETTLE_S = 0.3
+_LIFT_S = 1.0
+
+
+@dataclass
+class HoldResult:
+    """Outcome of one lift-and-shake trial."""
+
+    held: bool
+    lift: float
+    """How far the part rose (metres)."""
+    drift: float
+    """Part translation relative to the TCP between the start of the lift and the end (metres)."""
+    drift_angle: float
+    """Part rotation relative to the TCP over the same span (radians)."""
+    reason: str = ""
+
+
+def _quat(T: np.ndarray) -> list[float]:
+    return geometry.to_quat(T).tolist()
+
+
+class HoldSimulator:
+    """One PyBullet DIRECT client for many hold checks of one part; use as a context manager."""
+
+    def __init__(
+        self,
+        hand: HandSpec,
+        part: PartModel,
+        *,
+        friction: float = 0.5,
+        timestep: float = 1.0 / 240.0,
+        hand_mass: float = 0.8,
+        finger_mass: float = 0.05,
+    ) -> None:
+        self.hand = hand
+        self.part = part
+        self.friction = float(friction)
+        self.dt = float(timestep)
+        self.hand_mass = hand_mass
+        self.finger_mass = finger_mass
+        self.client = pybullet.connect(pybullet.DIRECT)
+        self.pieces = convex_pieces(part)
+
+    def close(self) -> None:
+        """Disconnect the simulator."""
+        if self.client >= 0:
+            pybullet.disconnect(self.client)
+            self.client = -1
+
+    def __enter__(self) -> HoldSimulator:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ bodies
+    def _spawn_part(self, T_world_part: np.ndarray) -> int:
+        c = self.client
+        vols = np.array([max(float(p.volume), 1e-12) for p in self.pieces])
+        masses = self.part.mass * vols / vols.sum()
+        shapes, frames = [], []
+        for p in self.pieces:
+            centre = np.asarray(p.center_mass if p.is_volume else p.centroid, dtype=float)
+            verts = (np.asarray(p.vertices) - centre).tolist()
+            shapes.append(pybullet.createCollisionShape(pybullet.GEOM_MESH, vertices=verts, physicsClientId=c))
+            frames.append(centre)
+        T0 = T_world_part @ geometry.from_rotation(np.eye(3), frames[0])
+        n = len(shapes) - 1
+        body = pybullet.createMultiBody(
+            baseMass=float(masses[0]),
+            baseCollisionShapeIndex=shapes[0],
+            basePosition=T0[:3, 3].tolist(),
+            baseOrientation=_quat(T0),
+            linkMasses=[float(m) for m in masses[1:]],
+            linkCollisionShapeIndices=shapes[1:],
+            linkVisualShapeIndices=[-1] * n,
+            linkPositions=[(f - frames[0]).tolist() for f in frames[1:]],
+            linkOrientations=[[0, 0, 0, 1]] * n,
+            linkInertialFramePositions=[[0, 0, 0]] * n,
+            linkInertialFrameOrientations=[[0, 0, 0, 1]] * n,
+            linkParentIndices=[0] * n,
+            linkJointTypes=[pybullet.JOINT_FIXED] * n,
+            linkJointAxis=[[0, 0, 1]] * n,
+            physicsClientId=c,
+        )
+        for link in range(-1, n):
+            pybullet.changeDynamics(body, link, lateralFriction=1.0, spinningFriction=1.0, physicsClientId=c)
+        self._part_offset = frames[0]
+        return body
+
+    def _part_pose(self, body: int) -> np.ndarray:
+        pos, orn = pybullet.getBasePositionAndOrientation(body, physicsClientId=self.client)
+        T_world_base = geometry.from_quat(orn, pos)
+        return T_world_base @ geometry.from_rotation(np.eye(3), -self._part_offset)
+
+    def _spawn_gripper(self, T_world_tcp: np.ndarray, opening: float) -> int:
+        c = self.client
+        boxes = {b.name: b for b in hand_boxes(self.hand, 0.0)}
+        palm = boxes["palm"]
+        palm_shape = pybullet.createCollisionShape(
+            pybullet.GEOM_BOX,
+            halfExtents=(0.5 * palm.size).tolist(),
+            collisionFramePosition=palm.center.tolist(),
+            physicsClientId=c,
+        )
+        pad = np.array([self.hand.pad_size[0], _PAD_THICKNESS, self.hand.pad_size[1]])
+        finger_shapes = []
+        for name, sign in (("finger0", -1.0), ("finger1", 1.0)):
+            f = boxes[name]
+            # The finger body sits behind a 1 mm pad whose face is the jaw plane (y = 0 at zero opening).
+            body_centre = f.center + np.array([0.0, sign * _PAD_THICKNESS, 0.0])
+            pad_centre = np.array([0.0, sign * 0.5 * _PAD_THICKNESS, 0.0])
+            finger_shapes.append(
+                pybullet.createCollisionShapeArray(
+                    shapeTypes=[pybullet.GEOM_BOX, pybullet.GEOM_BOX],
+                    halfExtents=[(0.5 * f.size).tolist(), (0.5 * pad).tolist()],
+                    collisionFramePositions=[body_centre.tolist(), pad_centre.tolist()],
+                    physicsClientId=c,
+                )
+            )
+        body = pybullet.createMultiBody(
+            baseMass=self.hand_mass,
+            baseCollisionShapeIndex=palm_shape,
+            basePosition=T_world_tcp[:3, 3].tolist(),
+            baseOrientation=_quat(T_world_tcp),
+            linkMasses=[self.finger_mass, self.finger_mass],
+            linkCollisionShapeIndices=finger_shapes,
+            linkVisualShapeIndices=[-1, -1],
+            linkPositions=[[0, 0, 0], [0, 0, 0]],
+            linkOrientations=[[0, 0, 0, 1]] * 2,
+            linkInertialFramePositions=[[0, 0, 0]] * 2,
+            linkInertialFrameOrientations=[[0, 0, 0, 1]] * 2,
+            linkParentIndices=[0, 0],
+            linkJointTypes=[pybullet.JOINT_PRISMATIC] * 2,
+            linkJointAxis=[[0, 1, 0], [0, 1, 0]],
+            physicsClientId=c,
+        )
+        for j, q in ((0, -0.5 * opening), (1, 0.5 * opening)):
+            pybullet.resetJointState(body, j, q, physicsClientId=c)
+        # The jaws are coupled, as in a real parallel gripper's linkage: q0 + q1 = 0
+        # keeps the part centred instead of letting both fingers drift along y together.
+        gear = pybullet.createConstraint(
+            body, 0, body, 1, pybullet.JOINT_GEAR, [0, 1, 0], [0, 0, 0], [0, 0, 0], physicsClientId=c
+        )
+        pybullet.changeConstraint(gear, gearRatio=1.0, maxForce=1000.0, erp=0.2, physicsClientId=c)
+        # Torsional friction of a flat pad: a uniformly pressed disc of radius a resists
+        # (2/3) mu F a; a is taken as half the radius of the pad's equal-area disc, since the
+        # contact patch rarely covers the whole pad. Bullet's contacts between a box and a
+        # convex mesh are often single points, which would resist no twisting otherwise.
+        a = 0.5 * float(np.sqrt(self.hand.pad_size[0] * self.hand.pad_size[1] / np.pi))
+        spinning = (2.0 / 3.0) * self.friction * a
+        for link in (0, 1):
+            pybullet.changeDynamics(
+                body,
+                link,
+                lateralFriction=self.friction,
+                spinningFriction=spinning,
+                frictionAnchor=True,
+                physicsClientId=c,
+            )
+        return body
+
+    # ------------------------------------------------------------------ trial
+    def check(
+        self,
+        grasp: Grasp,
+        *,
+        lift: float = 0.10,
+        hold: float = 2.0,
+        shake_amplitude: float = 0.01,
+        shake_hz: float = 2.0,
+        clearance: float = 0.002,
+    ) -> HoldResult:
+        """Run one lift-and-shake trial of ``grasp`` (part frame) and report whether the part stayed held."""
+        c = self.client
+        pybullet.resetSimulation(physicsClientId=c)
+        pybullet.setPhysicsEngineParameter(fixedTimeStep=self.dt, numSolverIterations=100, physicsClientId=c)
+        pybullet.setGravity(0, 0, 0, physicsClientId=c)
+        # Top-down: TCP z along world -z, jaw axis along world x, TCP 0.5 m up.
+        R_world_tcp = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+        T_world_tcp = geometry.from_rotation(R_world_tcp, [0.0, 0.0, 0.5])
+        T_world_part = T_world_tcp @ geometry.invert(grasp.T_part_tcp)
+        part = self._spawn_part(T_world_part)
+        opening = min(grasp.width + 2.0 * clearance, self.hand.max_width)
+        gripper = self._spawn_gripper(T_world_tcp, opening)
+        orn = _quat(T_world_tcp)
+        cid = pybullet.createConstraint(
+            gripper, -1, -1, -1, pybullet.JOINT_FIXED, [0, 0, 0], [0, 0, 0],
+            T_world_tcp[:3, 3].tolist(), childFrameOrientation=orn, physicsClientId=c,
+        )  # fmt: skip
+        pybullet.changeConstraint(cid, maxForce=2000.0, physicsClientId=c)
+        for j in (0, 1):
+            pybullet.setJointMotorControl2(
+                gripper, j, pybullet.POSITION_CONTROL, targetPosition=0.0,
+                force=self.hand.max_force, maxVelocity=0.1, physicsClientId=c,
+            )  # fmt: skip
+        self._run(_CLOSE_S)
+        pybullet.setGravity(0, 0, -9.81, physicsClientId=c)
+        self._run(_SETTLE_S)
+        T_tcp_part0 = geometry.invert(T_world_tcp) @ self._part_pose(part)
+        z0 = self._part_pose(part)[2, 3]
+        start = T_world_tcp[:3, 3].copy()
+        steps = round(_LIFT_S / self.dt)
+        for k in range(1, steps + 1):
+            pos = start + np.array([0.0, 0.0, lift * k / steps])
+            self._drive(cid, pos, orn)
+            pybullet.stepSimulation(physicsClientId=c)
+        top = start + np.array([0.0, 0.0, lift])
+        steps = round(hold / self.dt)
+        for k in range(1, steps + 1):
+            t = k * self.dt
+            dx = shake_amplitude * np.sin(2.0 * np.pi * shake_hz * t)
+            dy = 0.5 * shake_amplitude * np.sin(2.0 * np.pi * shake_hz * t + 0.7)
+            pos = top + np.array([dx, dy, 0.0])
+            self._drive(cid, pos, orn)
+            pybullet.stepSimulation(physicsClientId=c)
+        pos, _ = pybullet.getBasePositionAndOrientation(gripper, physicsClientId=c)
+        T_world_tcp_end = geometry.from_rotation(R_world_tcp, pos)
+        T_world_part_end = self._part_pose(part)
+        T_tcp_part1 = geometry.invert(T_world_tcp_end) @ T_world_part_end
+        risen = float(T_world_part_end[2, 3] - z0)
+        drift = geometry.translation_distance(T_tcp_part0, T_tcp_part1)
+        angle = geometry.rotation_distance(T_tcp_part0, T_tcp_part1)
+        touching = [len(pybullet.getContactPoints(gripper, part, linkIndexA=j, physicsClientId=c)) > 0 for j in (0, 1)]
+        held = risen >= 0.8 * lift and all(touching)
+        reason = "" if held else ("dropped" if risen < 0.8 * lift else "lost contact with a finger")
+        return HoldResult(held=held, lift=risen, drift=drift, drift_angle=angle, reason=reason)
+
+    def _drive(self, constraint: int, position: np.ndarray, orientation: list[float]) -> None:
+        """Move the palm's world constraint to a pose (the caller steps the simulation)."""
+        pybullet.changeConstraint(
+            constraint,
+            jointChildPivot=position.tolist(),
+            jointChildFrameOrientation=orientation,
+            maxForce=2000.0,
+            physicsClientId=self.client,
+        )
+
+    def _run(self, seconds: float) -> None:
+        for _ in range(round(seconds / self.dt)):
+            pybullet.stepSimulation(physicsClientId=self.client)
