@@ -10,11 +10,12 @@ import numpy as np
 
 from asmteach.plugins.detectors.aruco.markers import get_dictionary
 
-__all__ = ["MarkerDetector"]
+__all__ = ["MarkerDetector", "refine_corners_edges"]
 
-RefineMethod = Literal["subpix", "contour", "apriltag", "none"]
+RefineMethod = Literal["edges", "subpix", "contour", "apriltag", "none"]
 
 _REFINE = {
+    "edges": cv2.aruco.CORNER_REFINE_SUBPIX,
     "subpix": cv2.aruco.CORNER_REFINE_SUBPIX,
     "contour": cv2.aruco.CORNER_REFINE_CONTOUR,
     "apriltag": cv2.aruco.CORNER_REFINE_APRILTAG,
@@ -33,10 +34,12 @@ class MarkerDetector:
         self,
         dictionaries: Iterable[str],
         *,
-        refine: RefineMethod = "subpix",
+        refine: RefineMethod = "edges",
         refine_window: int = 5,
         min_perimeter_rate: float = 0.01,
     ) -> None:
+        self.refine = refine
+        self.cells: dict[str, int] = {}
         self.detectors: dict[str, cv2.aruco.ArucoDetector] = {}
         for name in sorted(set(dictionaries)):
             params = cv2.aruco.DetectorParameters()
@@ -46,12 +49,15 @@ class MarkerDetector:
             params.cornerRefinementMinAccuracy = 0.001
             # Small markers far from a 1280x720 camera are ~15 px across: allow them.
             params.minMarkerPerimeterRate = float(min_perimeter_rate)
-            self.detectors[name] = cv2.aruco.ArucoDetector(get_dictionary(name), params)
+            dictionary = get_dictionary(name)
+            self.cells[name] = dictionary.markerSize + 2
+            self.detectors[name] = cv2.aruco.ArucoDetector(dictionary, params)
 
     def detect(self, image: np.ndarray) -> dict[tuple[str, int], np.ndarray]:
         """Corners of every marker found in a BGR or grey ``uint8`` image."""
         grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
         found: dict[tuple[str, int], np.ndarray] = {}
+        grey_f = grey.astype(np.float32) if self.refine == "edges" else None
         for name, det in self.detectors.items():
             corners, ids, _ = det.detectMarkers(grey)
             if ids is None:
@@ -62,5 +68,107 @@ class MarkerDetector:
                     # The same id twice in one frame cannot be told apart: drop both.
                     found[key] = np.full((4, 2), np.nan)
                     continue
-                found[key] = np.asarray(c, dtype=np.float64).reshape(4, 2)
+                corners_px = np.asarray(c, dtype=np.float64).reshape(4, 2)
+                if grey_f is not None:
+                    refined = refine_corners_edges(grey_f, corners_px, self.cells[name])
+                    if refined is None:
+                        continue  # partly occluded: its corners cannot be trusted
+                    corners_px = refined
+                found[key] = corners_px
         return {k: v for k, v in found.items() if np.all(np.isfinite(v))}
+
+
+def _side_points(
+    grey: np.ndarray, a: np.ndarray, b: np.ndarray, outward: np.ndarray, half_width: float
+) -> tuple[np.ndarray, int]:
+    """Sub-pixel edge points along the side ``a -> b`` of a dark square on a bright margin.
+
+    Each point comes from an intensity profile across the edge: for an edge
+    blurred by any symmetric kernel narrower than the window, the step's
+    position is the window end minus the area under the normalised profile,
+    which needs no edge model and averages the noise of every sample.
+    """
+    side = b - a
+    length = float(np.linalg.norm(side))
+    t = side / length
+    n_along = max(6, int(0.7 * length))
+    s = np.linspace(0.15, 0.85, n_along) * length
+    step = 0.25
+    d = np.arange(-half_width, half_width + 1e-9, step)
+    pts = a[None, None, :] + s[:, None, None] * t + d[None, :, None] * outward  # (n_along, n_d, 2)
+    prof = cv2.remap(
+        grey, pts[..., 0].astype(np.float32), pts[..., 1].astype(np.float32), cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_REPLICATE,
+    ).astype(np.float64)
+    k = max(2, len(d) // 5)
+    dark = prof[:, :k].mean(axis=1)
+    bright = prof[:, -k:].mean(axis=1)
+    contrast = bright - dark
+    ok = contrast > 15.0
+    norm = (prof - dark[:, None]) / np.where(ok, contrast, 1.0)[:, None]
+    area = np.trapezoid(np.clip(norm, -0.5, 1.5), d, axis=1)
+    offset = d[-1] - area  # position of the step along the outward normal
+    ok &= np.abs(offset) < 0.8 * half_width
+    return (a[None, :] + s[:, None] * t + offset[:, None] * outward)[ok], n_along
+
+
+def _fit_line(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, int, float] | None:
+    """Total-least-squares line ``(point, direction, inliers, rms)`` with 3-MAD outlier rejection."""
+    if len(points) < 4:
+        return None
+    r = np.zeros(len(points))
+    for _ in range(2):
+        c = points.mean(axis=0)
+        _, _, vt = np.linalg.svd(points - c, full_matrices=False)
+        direction, normal = vt[0], vt[1]
+        r = np.abs((points - c) @ normal)
+        keep = r <= max(3.0 * 1.4826 * float(np.median(r)), 0.05)
+        if keep.all() or keep.sum() < 4:
+            break
+        points = points[keep]
+    return c, direction, len(points), float(np.sqrt(np.mean(r[keep] ** 2))) if keep.any() else np.inf
+
+
+def refine_corners_edges(
+    grey: np.ndarray, corners: np.ndarray, cells: int, iterations: int = 2, *, min_inliers: float = 0.85,
+    max_line_rms: float = 0.25,
+) -> np.ndarray | None:
+    """Refine a marker's ``(4, 2)`` corners by fitting lines to its four outer edges.
+
+    ``grey`` is a float32 image; ``cells`` is the marker's width in cells
+    including the black border (the profile window stays inside the border
+    cell and the white margin of one cell around it). Returns ``None`` when an
+    edge is not a clean straight step (fewer than ``min_inliers`` of its
+    profiles agree, or their line RMS exceeds ``max_line_rms`` pixels): the
+    marker is partly hidden (a finger over an edge) and its corners would be
+    wrong while still fitting a single-marker PnP well.
+    """
+    out = np.asarray(corners, dtype=np.float64).copy()
+    for _ in range(iterations):
+        centre = out.mean(axis=0)
+        side_len = np.linalg.norm(np.roll(out, -1, axis=0) - out, axis=1)
+        half_width = float(np.clip(0.6 * side_len.min() / cells, 1.0, 4.0))
+        lines = []
+        for k in range(4):
+            a, b = out[k], out[(k + 1) % 4]
+            t = (b - a) / np.linalg.norm(b - a)
+            outward = np.array([t[1], -t[0]])
+            if np.dot(outward, 0.5 * (a + b) - centre) < 0:
+                outward = -outward
+            pts, n_total = _side_points(grey, a, b, outward, half_width)
+            line = _fit_line(pts)
+            if line is None or line[2] < min_inliers * n_total or line[3] > max_line_rms:
+                return None
+            lines.append(line[:2])
+        new = np.empty_like(out)
+        for k in range(4):
+            (p1, d1), (p2, d2) = lines[(k - 1) % 4], lines[k]
+            A = np.column_stack([d1, -d2])
+            if abs(np.linalg.det(A)) < 1e-6:
+                return out
+            s = np.linalg.solve(A, p2 - p1)
+            new[k] = p1 + s[0] * d1
+        if np.max(np.linalg.norm(new - out, axis=1)) > 3.0:
+            return out  # a wild jump means the edges were not the marker's: keep OpenCV's corners
+        out = new
+    return out

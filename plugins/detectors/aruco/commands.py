@@ -1,0 +1,172 @@
+"""CLI commands of the teaching phase: ``teach``, ``render-demo`` and ``calibrate``."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import cv2
+import numpy as np
+from pydantic import ValidationError
+
+from asmteach.core import geometry
+from asmteach.core.config import RunConfig, format_validation_error, load_run_config, validate_settings
+from asmteach.core.errors import UserError
+from asmteach.core.hooks import hookimpl
+from asmteach.core.io import atomic_path, write_json, write_model
+from asmteach.core.models import CameraIntrinsics
+from asmteach.core.parts import build_part, load_structure
+
+__all__ = ["asmteach_add_commands", "demo_settings", "resolve_camera", "write_demo"]
+
+
+def demo_settings(cfg: RunConfig):
+    """The config's ``demo`` section validated by :class:`~.scene.DemoSettings` (errors name ``demo.<key>``)."""
+    from asmteach.plugins.detectors.aruco.scene import DemoSettings
+
+    try:
+        return DemoSettings.model_validate(cfg.demo)
+    except ValidationError as exc:
+        raise UserError(format_validation_error(exc, "demo")) from None
+
+
+def resolve_camera(explicit: str | None, cfg: RunConfig | None, frames: Path | None) -> tuple[CameraIntrinsics, str]:
+    """Intrinsics from ``--camera``, else the config's ``camera``, else ``camera.yaml`` next to the frames,
+    else the C615-like default; returns the camera and where it came from."""
+    from asmteach.plugins.detectors.aruco.camera import c615_like, load_camera
+
+    if explicit:
+        return load_camera(explicit), explicit
+    if cfg is not None and cfg.camera:
+        p = cfg.path(cfg.camera)
+        return load_camera(p), str(p)
+    if frames is not None:
+        folder = frames if frames.is_dir() else frames.parent
+        if (folder / "camera.yaml").is_file():
+            return load_camera(folder / "camera.yaml"), str(folder / "camera.yaml")
+    return c615_like(), "default C615-like intrinsics"
+
+
+def _load_cfg(path: str) -> RunConfig:
+    # Only the teaching phase is needed here: other roles' plugins need not be installed.
+    cfg = load_run_config(path, check_plugins=False)
+    structure = cfg.path(cfg.structure)
+    if not structure.is_file():
+        raise UserError(f"{path}: structure: no such file {structure}")
+    return cfg
+
+
+def _cmd_teach(args: argparse.Namespace) -> int:
+    from asmteach.core import registry
+    from asmteach.plugins.detectors.aruco.frames import load_frames
+
+    cfg = _load_cfg(args.config)
+    task = load_structure(cfg.path(cfg.structure))
+    cls = registry.get_class("teachers", cfg.teacher.plugin)
+    settings = validate_settings(cls, cfg.teacher.settings, where="teacher.settings")
+    frames_path = Path(args.frames)
+    camera, cam_source = resolve_camera(args.camera, cfg, frames_path)
+    frames = load_frames(frames_path)
+    teacher = cls(settings, seed=cfg.seed)
+    learned = teacher.teach(frames, camera, task)
+    write_model(args.out, learned)
+    ev = learned.evidence
+    pose = geometry.to_xyz_mm_rpy_deg(learned.T_A_B)
+    print(f"taught {learned.name} from {len(frames)} frame(s) ({cam_source})")
+    print(f"  T_A_B: xyz {pose['xyz_mm']} mm, rpy {pose['rpy_deg']} deg")
+    print(f"  v_a: {np.round(learned.v_a, 4).tolist()} ({ev.insertion_source if ev else '?'})")
+    if ev is not None:
+        print(f"  frames used {len(ev.frames_used)}/{ev.frames_total}, spread {ev.spread_mm:.3f} mm "
+              f"{ev.spread_deg:.3f} deg")
+    print(f"  wrote {args.out}")
+    return 0
+
+
+def write_demo(cfg: RunConfig, out: Path, *, camera: CameraIntrinsics | None = None) -> dict:
+    """Render the demonstration of ``cfg`` into ``out``: frames, ``camera.yaml``, ``ground_truth.json``."""
+    from asmteach.plugins.detectors.aruco.camera import save_camera
+    from asmteach.plugins.detectors.aruco.scene import render_demo_frames
+
+    settings = demo_settings(cfg)
+    task = load_structure(cfg.path(cfg.structure))
+    if camera is None:
+        camera, _ = resolve_camera(None, cfg, None)
+    if any(abs(d) > 0 for d in camera.dist):
+        raise UserError("render-demo draws an ideal pinhole camera; give a camera file with zero distortion")
+    a, b = build_part(task.part_a), build_part(task.part_b)
+    out.mkdir(parents=True, exist_ok=True)
+    records = []
+    for fr, img, visible in render_demo_frames(a, b, task, camera, settings, seed=cfg.seed):
+        name = f"frame_{fr.index:04d}.{settings.image_format}"
+        with atomic_path(out / name) as tmp:
+            if not cv2.imwrite(str(tmp), img):
+                raise UserError(f"{out / name}: cannot write the image")
+        records.append({"file": name, "phase": fr.phase, "T_cam_A": fr.T_cam_A.tolist(),
+                        "T_cam_B": fr.T_cam_B.tolist(), "visible_markers": visible})
+    save_camera(out / "camera.yaml", camera, name="render-demo")
+    truth = {
+        "structure": task.name,
+        "seed": cfg.seed,
+        "demo": settings.model_dump(mode="json"),
+        "T_A_B": task.T_A_B.tolist(),
+        "v_a": np.asarray(task.v_a).tolist(),
+        "frames": records,
+    }
+    write_json(out / "ground_truth.json", truth)
+    return truth
+
+
+def _cmd_render_demo(args: argparse.Namespace) -> int:
+    cfg = _load_cfg(args.config)
+    truth = write_demo(cfg, Path(args.out))
+    n_app = sum(r["phase"] == "approach" for r in truth["frames"])
+    print(f"rendered {len(truth['frames'])} frame(s) of {truth['structure']} ({n_app} approach) into {args.out}")
+    return 0
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from asmteach.plugins.detectors.aruco.calibrate import BoardSpec, calibrate_charuco
+    from asmteach.plugins.detectors.aruco.camera import save_camera
+    from asmteach.plugins.detectors.aruco.frames import load_frames
+
+    try:
+        sx, sy = (int(v) for v in args.board.lower().split("x"))
+        spec = BoardSpec(squares_x=sx, squares_y=sy, square=args.square, marker=args.marker,
+                         dictionary=args.dictionary)
+    except ValueError as exc:
+        msg = format_validation_error(exc) if isinstance(exc, ValidationError) else "give --board as NxM, e.g. 7x5"
+        raise UserError(f"--board/--square/--marker: {msg}") from None
+    res = calibrate_charuco(load_frames(args.images), spec)
+    save_camera(args.out, res.camera, name="charuco-calibration",
+                notes=f"RMS {res.rms_px:.3f} px over {res.images_used}/{res.images_total} images")
+    K = res.camera.K
+    print(f"calibrated from {res.images_used}/{res.images_total} image(s): RMS {res.rms_px:.3f} px")
+    print(f"  fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} cx {K[0, 2]:.2f} cy {K[1, 2]:.2f}; dist "
+          f"{np.round(res.camera.dist, 4).tolist()}")
+    print(f"  wrote {args.out}")
+    return 0
+
+
+@hookimpl
+def asmteach_add_commands(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``teach``, ``render-demo`` and ``calibrate``."""
+    p = subparsers.add_parser("teach", help="learn T_A_B and v_a from demonstration frames (folder or video)")
+    p.add_argument("config", help="run config (structure, camera, teacher)")
+    p.add_argument("--frames", required=True, help="folder of images or a video file")
+    p.add_argument("--out", required=True, help="assembly task JSON to write")
+    p.add_argument("--camera", default=None, help="camera intrinsics YAML (default: config, then frames folder)")
+    p.set_defaults(func=_cmd_teach)
+
+    p = subparsers.add_parser("render-demo", help="render a synthetic demonstration with exact ground truth")
+    p.add_argument("config", help="run config (structure, camera, demo section)")
+    p.add_argument("--out", required=True, help="output folder for frames, camera.yaml, ground_truth.json")
+    p.set_defaults(func=_cmd_render_demo)
+
+    p = subparsers.add_parser("calibrate", help="camera intrinsics from ChArUco board images")
+    p.add_argument("--images", required=True, help="folder of board images (or a video)")
+    p.add_argument("--out", required=True, help="camera YAML to write")
+    p.add_argument("--board", default="7x5", help="squares along x and y, e.g. 7x5")
+    p.add_argument("--square", type=float, default=0.04, help="square side, metres")
+    p.add_argument("--marker", type=float, default=0.03, help="marker side, metres")
+    p.add_argument("--dictionary", default="DICT_5X5_100", help="ArUco dictionary of the board")
+    p.set_defaults(func=_cmd_calibrate)

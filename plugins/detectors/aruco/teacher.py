@@ -1,0 +1,315 @@
+"""The ``aruco`` teacher: ``T_A_B`` and ``v_a`` from RGB frames of a human demonstration.
+
+Per frame: detect markers (OpenCV ``ArucoDetector``, edge-fitted sub-pixel
+corners), one multi-marker PnP per part (:mod:`.pnp`). Over frames: the
+assembled frames are the largest cluster of consistent relative poses
+``T_A_B = T_cam_A^-1 T_cam_B``; planar flips left ambiguous in a frame are
+resolved by agreement with that cluster; outliers are rejected by
+reprojection error and by robust fusion (:mod:`.fusion`); a joint
+Levenberg-Marquardt adjustment over all kept frames (unknowns: ``T_A_B`` and
+each frame's ``T_cam_A``) polishes the fused pose. Frames before the
+assembled ones where B moves toward A give ``v_a`` (:mod:`.insertion`).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from pydantic import Field
+from scipy.optimize import least_squares
+from scipy.sparse import lil_matrix
+
+from asmteach.core import geometry
+from asmteach.core.errors import UserError
+from asmteach.core.interfaces import Teacher
+from asmteach.core.models import AssemblyTask, CameraIntrinsics, StrictModel, TeachingEvidence
+from asmteach.core.parts import build_part
+from asmteach.plugins.detectors.aruco.detect import MarkerDetector, RefineMethod
+from asmteach.plugins.detectors.aruco.fusion import fuse_poses
+from asmteach.plugins.detectors.aruco.insertion import check_retreat, direction_from_approach, separation_direction
+from asmteach.plugins.detectors.aruco.markers import MarkerRef, marker_table
+from asmteach.plugins.detectors.aruco.pnp import MarkerObservation, PartPose, solve_part_pose
+
+__all__ = ["ArucoTeacher", "ArucoTeacherSettings", "FrameResult"]
+
+
+class ArucoTeacherSettings(StrictModel):
+    """Settings of the ``aruco`` teacher (lengths in metres, angles in degrees, errors in pixels)."""
+
+    corner_refinement: RefineMethod = Field("edges", description="edges: line fits to the marker's outer edges")
+    marker_reject_px: float = Field(1.0, gt=0, description="drop a marker whose RMS reprojection error exceeds this")
+    frame_reject_px: float = Field(1.0, gt=0, description="drop a frame whose RMS reprojection error exceeds this")
+    min_frames: int = Field(3, ge=1, description="assembled frames needed (both parts seen)")
+    assembled_radius: float = Field(0.004, gt=0, description="B-in-A positions this close form the assembled cluster")
+    assembled_angle_deg: float = Field(4.0, gt=0, description="... and rotations this close")
+    fusion_k: float = Field(3.0, gt=0, description="outlier threshold of the fusion, robust standard deviations")
+    joint_refine: bool = Field(True, description="joint LM adjustment of T_A_B over all kept frames")
+    min_approach_frames: int = Field(3, ge=2, description="approach frames needed to learn v_a")
+    min_approach_travel: float = Field(0.01, gt=0, description="B must travel this far toward A to learn v_a")
+    check_insertion: bool = Field(True, description="check v_a with python-fcl; fall back to geometry if it fails")
+    retract: float = Field(0.5, gt=0, description="retreat distance of the check along -v_a, metres")
+    collision_tolerance: float = Field(5e-4, ge=0, description="meshes shrunk by this for contact checks, metres")
+    threads: int | None = Field(None, ge=1, description="detection threads (default: all cores)")
+
+
+@dataclass
+class FrameResult:
+    """What the teacher made of one frame."""
+
+    index: int
+    pose_a: PartPose | None
+    pose_b: PartPose | None
+    obs_a: list[MarkerObservation]
+    obs_b: list[MarkerObservation]
+    T_A_B: np.ndarray | None = None
+
+    @property
+    def rms_px(self) -> float:
+        """RMS reprojection error over both parts' corners, pixels."""
+        num = den = 0.0
+        for p in (self.pose_a, self.pose_b):
+            if p is not None:
+                n = 4 * len(p.marker_ids)
+                num += n * p.rms_px**2
+                den += n
+        return float(np.sqrt(num / den)) if den else float("inf")
+
+
+class ArucoTeacher(Teacher):
+    """Learns ``T_A_B`` and ``v_a`` from frames showing markers on both parts."""
+
+    Settings = ArucoTeacherSettings
+    settings: ArucoTeacherSettings
+
+    # ------------------------------------------------------------ per frame
+    def observe(self, frames: Sequence[np.ndarray], camera: CameraIntrinsics, task: AssemblyTask) -> list[FrameResult]:
+        """Detect markers and solve each part's pose in every frame."""
+        table = marker_table(task.part_a, task.part_b)
+        det = MarkerDetector({k[0] for k in table}, refine=self.settings.corner_refinement)
+        K, dist = camera.K, camera.dist_array
+        results: list[FrameResult] = []
+        prior: dict[str, np.ndarray | None] = {"A": None, "B": None}
+        for i, img in enumerate(frames):
+            h, w = img.shape[:2]
+            if (w, h) != (camera.width, camera.height):
+                raise UserError(
+                    f"frame {i} is {w}x{h} pixels but the camera intrinsics are for {camera.width}x{camera.height}; "
+                    "give the camera file of these frames (--camera)"
+                )
+        # Detection is independent per frame and OpenCV releases the GIL: use every core.
+        with ThreadPoolExecutor(max_workers=max(1, min(self.settings.threads or os.cpu_count() or 1, 16))) as pool:
+            detections = list(pool.map(det.detect, frames))
+        for i, found in enumerate(detections):
+            obs: dict[str, list[MarkerObservation]] = {"A": [], "B": []}
+            for key, corners in found.items():
+                ref: MarkerRef | None = table.get(key)
+                if ref is None:
+                    continue
+                m = ref.spec
+                obs[ref.role].append(MarkerObservation(m.id, m.size, m.T_part_marker, corners))
+            poses = {}
+            for role in ("A", "B"):
+                priors = [prior[role]] if prior[role] is not None else None
+                poses[role] = (
+                    solve_part_pose(obs[role], K, dist, priors=priors, reject_px=self.settings.marker_reject_px)
+                    if obs[role] else None
+                )
+                if poses[role] is not None:
+                    prior[role] = poses[role].T_cam_part
+            fr = FrameResult(i, poses["A"], poses["B"], obs["A"], obs["B"])
+            if fr.pose_a is not None and fr.pose_b is not None:
+                fr.T_A_B = geometry.invert(fr.pose_a.T_cam_part) @ fr.pose_b.T_cam_part
+            results.append(fr)
+        return results
+
+    # ------------------------------------------------------------ over frames
+    def teach(self, frames: Sequence[np.ndarray], camera: CameraIntrinsics, task: AssemblyTask) -> AssemblyTask:
+        """Estimate ``T_A_B``, ``v_a`` and the evidence (see the module docstring)."""
+        s = self.settings
+        results = self.observe(frames, camera, task)
+        notes: list[str] = []
+        for role, part in (("A", task.part_a), ("B", task.part_b)):
+            if not any((r.obs_a if role == "A" else r.obs_b) for r in results):
+                ids = [m.id for m in part.markers]
+                raise UserError(
+                    f"no marker of part {part.name!r} (ids {ids}, {part.markers[0].dictionary}) was seen in any of "
+                    f"{len(results)} frame(s); check the dictionary, the ids and that the part faces the camera"
+                )
+        both = [r for r in results if r.T_A_B is not None and r.rms_px <= s.frame_reject_px]
+        if len(both) < s.min_frames:
+            raise UserError(
+                f"both parts were seen with a consistent pose in only {len(both)} of {len(results)} frame(s); "
+                f"at least {s.min_frames} are needed (show both parts' markers longer)"
+            )
+        cluster, flips = self._assembled_cluster(both)
+        if flips:
+            notes.append(f"{flips} frame(s) with an ambiguous planar flip resolved by agreement with other frames")
+        if len(cluster) < s.min_frames:
+            raise UserError(
+                f"only {len(cluster)} frame(s) agree on the assembled pose; at least {s.min_frames} are needed "
+                "(hold the assembled parts still in view longer)"
+            )
+        fused = fuse_poses(np.array([r.T_A_B for r in cluster]), k=s.fusion_k)
+        used = [r for r, keep in zip(cluster, fused.inliers, strict=True) if keep]
+        T_A_B = fused.T
+        if s.joint_refine and len(used) >= 2:
+            T_A_B, jnote = self._joint_refine(used, T_A_B, camera)
+            notes.append(jnote)
+        # Insertion direction from the approach (frames before the assembled ones).
+        first_used = min(r.index for r in used)
+        approach = [
+            r for r in results
+            if r.T_A_B is not None and r.index < first_used and r.rms_px <= s.frame_reject_px
+            and geometry.rotation_distance(r.T_A_B, T_A_B) < np.radians(10.0)
+            and geometry.translation_distance(r.T_A_B, T_A_B) > s.assembled_radius
+        ]
+        v_a: np.ndarray | None = None
+        source = "geometric"
+        if len(approach) >= s.min_approach_frames:
+            pos = np.array([r.T_A_B[:3, 3] for r in approach])
+            travel = float(np.max(np.linalg.norm(pos - T_A_B[:3, 3], axis=1)))
+            if travel >= s.min_approach_travel:
+                v_a, lateral, n_kept = direction_from_approach(pos, T_A_B[:3, 3])
+                source = "demonstration"
+                notes.append(
+                    f"v_a from {n_kept} of {len(approach)} approach frame(s): travel {travel * 1000:.1f} mm, "
+                    f"lateral rms {lateral * 1000:.2f} mm"
+                )
+            else:
+                notes.append(f"approach travel {travel * 1000:.1f} mm is too short to learn v_a")
+        else:
+            notes.append(f"{len(approach)} approach frame(s) seen; at least {s.min_approach_frames} needed for v_a")
+        meshes = None
+        if s.check_insertion or v_a is None:
+            meshes = (build_part(task.part_a).mesh, build_part(task.part_b).mesh)
+        if v_a is not None and s.check_insertion and meshes is not None:
+            chk = check_retreat(*meshes, T_A_B, v_a, retract=s.retract, tolerance=s.collision_tolerance)
+            if chk.ok:
+                notes.append(f"v_a checked: B retreated by {s.retract} m along -v_a stays free of A (python-fcl)")
+            else:
+                notes.append(
+                    f"learned v_a {np.round(v_a, 3).tolist()} fails the retreat check (collision at "
+                    f"{(chk.first_collision or s.retract) * 1000:.1f} mm); trying the geometric direction"
+                )
+                try:
+                    v_a, travel = separation_direction(*meshes, T_A_B, tolerance=s.collision_tolerance)
+                    source = "geometric"
+                    notes.append(f"v_a from geometry: least-travel free retreat ({travel * 1000:.0f} mm to clear A)")
+                except ValueError:
+                    # The taught pose itself interpenetrates beyond the tolerance: keep what was demonstrated.
+                    notes.append("no straight free retreat from the taught pose; keeping the demonstrated v_a")
+        if v_a is None:
+            assert meshes is not None
+            try:
+                v_a, travel = separation_direction(*meshes, T_A_B, tolerance=s.collision_tolerance)
+            except ValueError as exc:
+                raise UserError(f"cannot find an insertion direction: {exc}; show the approach in the frames") from None
+            notes.append(f"v_a from geometry: least-travel free retreat ({travel * 1000:.0f} mm to clear A)")
+        rejected = sorted({i for r in results for p in (r.pose_a, r.pose_b) if p for i in p.rejected_ids})
+        if rejected:
+            notes.append(f"markers rejected by reprojection error in some frames: {rejected}")
+        evidence = TeachingEvidence(
+            frames_total=len(results),
+            frames_used=[r.index for r in used],
+            residuals_px=[round(r.rms_px, 4) for r in used],
+            spread_mm=fused.spread_m * 1000.0,
+            spread_deg=float(np.degrees(fused.spread_rad)),
+            insertion_source=source,
+            notes=notes,
+        )
+        return AssemblyTask(
+            name=task.name, part_a=task.part_a, part_b=task.part_b, T_A_B=T_A_B, v_a=v_a, evidence=evidence
+        )
+
+    def _assembled_cluster(self, frames: list[FrameResult]) -> tuple[list[FrameResult], int]:
+        """Frames in the densest cluster of relative poses, flips resolved; and how many flips were resolved."""
+        s = self.settings
+        Ts = np.array([r.T_A_B for r in frames])
+        t = Ts[:, :3, 3]
+        dt = np.linalg.norm(t[:, None] - t[None], axis=-1)
+        R = Ts[:, :3, :3]
+        cosang = np.clip((np.einsum("iab,jab->ij", R, R) - 1.0) / 2.0, -1.0, 1.0)
+        close = (dt <= s.assembled_radius) & (np.degrees(np.arccos(cosang)) <= s.assembled_angle_deg)
+        counts = close.sum(axis=1)
+        # Densest frame; among ties the latest (the assembled pose ends a demonstration).
+        centre = int(np.flatnonzero(counts == counts.max())[-1])
+        ref = fuse_poses(Ts[close[centre]]).T
+        flips = 0
+        cluster = []
+        for r in frames:
+            options = [(r.pose_a.T_cam_part, r.pose_b.T_cam_part)]
+            options += [(Ta, r.pose_b.T_cam_part) for Ta, _ in r.pose_a.alternatives]
+            options += [(r.pose_a.T_cam_part, Tb) for Tb, _ in r.pose_b.alternatives]
+            best, best_cost = None, np.inf
+            for k, (Ta, Tb) in enumerate(options):
+                T = geometry.invert(Ta) @ Tb
+                cost = geometry.translation_distance(T, ref) / s.assembled_radius + geometry.rotation_distance(
+                    T, ref) / np.radians(s.assembled_angle_deg)
+                if cost < best_cost:
+                    best, best_cost = (k, T), cost
+            assert best is not None
+            k, T = best
+            if geometry.translation_distance(T, ref) <= 2 * s.assembled_radius and geometry.rotation_distance(
+                T, ref) <= np.radians(2 * s.assembled_angle_deg):
+                if k > 0:
+                    flips += 1
+                    Ta, Tb = options[k]
+                    r.pose_a.T_cam_part, r.pose_b.T_cam_part = Ta, Tb
+                r.T_A_B = T
+                cluster.append(r)
+        return cluster, flips
+
+    def _joint_refine(self, frames: list[FrameResult], T_A_B: np.ndarray, camera: CameraIntrinsics
+                      ) -> tuple[np.ndarray, str]:
+        """Least-squares over all kept frames' corners: unknowns ``T_A_B`` and each ``T_cam_A`` (Huber loss)."""
+        K, dist = camera.K, camera.dist_array
+        data = []
+        for r in frames:
+            obj_a = np.concatenate([o.object_points for o in r.obs_a if o.marker_id in r.pose_a.marker_ids])
+            img_a = np.concatenate([o.corners_px for o in r.obs_a if o.marker_id in r.pose_a.marker_ids])
+            obj_b = np.concatenate([o.object_points for o in r.obs_b if o.marker_id in r.pose_b.marker_ids])
+            img_b = np.concatenate([o.corners_px for o in r.obs_b if o.marker_id in r.pose_b.marker_ids])
+            data.append((obj_a, img_a, obj_b, img_b))
+        n = len(frames)
+
+        def pack(T: np.ndarray) -> np.ndarray:
+            return np.concatenate([cv2.Rodrigues(np.ascontiguousarray(T[:3, :3]))[0].ravel(), T[:3, 3]])
+
+        def unpack(x: np.ndarray) -> np.ndarray:
+            return geometry.from_rotation(cv2.Rodrigues(x[:3].reshape(3, 1))[0], x[3:6])
+
+        x0 = np.concatenate([pack(T_A_B)] + [pack(r.pose_a.T_cam_part) for r in frames])
+        sizes = [2 * (len(d[1]) + len(d[3])) for d in data]
+
+        def residuals(x: np.ndarray) -> np.ndarray:
+            rvec_ab, t_ab = x[:3], x[3:6]
+            out = []
+            for i, (obj_a, img_a, obj_b, img_b) in enumerate(data):
+                xa = x[6 + 6 * i: 12 + 6 * i]
+                pa, _ = cv2.projectPoints(obj_a, xa[:3], xa[3:], K, dist)
+                Tb = unpack(xa) @ geometry.from_rotation(cv2.Rodrigues(rvec_ab.reshape(3, 1))[0], t_ab)
+                pb, _ = cv2.projectPoints(obj_b, cv2.Rodrigues(np.ascontiguousarray(Tb[:3, :3]))[0], Tb[:3, 3], K, dist)
+                out.append((pa.reshape(-1, 2) - img_a).ravel())
+                out.append((pb.reshape(-1, 2) - img_b).ravel())
+            return np.concatenate(out)
+
+        sparsity = lil_matrix((sum(sizes), 6 + 6 * n), dtype=int)
+        row = 0
+        for i, sz in enumerate(sizes):
+            sparsity[row: row + sz, 0:6] = 1
+            sparsity[row: row + sz, 6 + 6 * i: 12 + 6 * i] = 1
+            row += sz
+        r0 = residuals(x0)
+        sol = least_squares(residuals, x0, jac_sparsity=sparsity, loss="huber", f_scale=0.5, x_scale="jac",
+                            method="trf", max_nfev=50)
+        T = unpack(sol.x[:6])
+        rms0 = float(np.sqrt(np.mean(r0**2) * 2))
+        rms1 = float(np.sqrt(np.mean(sol.fun**2) * 2))
+        shift = geometry.translation_distance(T, T_A_B) * 1000.0
+        return T, (f"joint adjustment over {n} frame(s): RMS {rms0:.3f} -> {rms1:.3f} px, "
+                   f"moved T_A_B by {shift:.3f} mm")
