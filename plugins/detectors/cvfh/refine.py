@@ -1,0 +1,206 @@
+"""ICP refinement and hypothesis verification, shared by the depth detectors.
+
+A hypothesis is a ``T_world_part`` (4x4, metres). Refinement runs Open3D's
+point-to-plane ICP from the observed cluster (world frame) to a dense sample
+of the part's surface (part frame, with normals), coarse then fine.
+Verification asks three questions of a refined pose:
+
+* fitness: which share of the observed cluster lies on the model surface;
+* inlier RMSE: how far those points are from it;
+* free-space violations: which share of the observed points near the part
+  (table included) the model would hide, i.e. the model surface would lie
+  in front of what the camera saw. A wrong pose, or a bigger part than the
+  one on the table, puts model surface where the camera saw through;
+* support (the paper's geometric constraint): a part lying on the table
+  touches it, so the model's lowest point must be at the table height, neither
+  below (inside the table) nor above (floating). This rejects the poses that
+  explain the visible surface equally well but hide a different shape below
+  it, e.g. an L-block turned over with its upright hidden under the foot.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+from pydantic import Field
+
+import asmteach.core  # noqa: F401  (loads libusb before open3d)
+from asmteach.core import geometry
+from asmteach.core.models import StrictModel, TablePlane
+from asmteach.plugins.detectors.cvfh.segment import to_o3d
+
+import open3d as o3d  # isort: skip
+
+__all__ = ["ModelCloud", "RefineSettings", "Verdict", "icp_refine", "model_cloud", "verify"]
+
+reg = o3d.pipelines.registration
+
+
+class RefineSettings(StrictModel):
+    """ICP and verification thresholds (metres)."""
+
+    model_points: int = Field(4000, ge=100, description="surface samples of the part model used by ICP")
+    icp_coarse_distance: float = Field(0.012, gt=0.0, description="correspondence distance of the first ICP pass")
+    icp_fine_distance: float = Field(0.004, gt=0.0, description="correspondence distance of the last ICP pass")
+    icp_iterations: int = Field(30, ge=1, description="iterations per ICP pass")
+    inlier_distance: float = Field(0.004, gt=0.0, description="a cluster point within this of the model is an inlier")
+    min_fitness: float = Field(
+        0.95, ge=0.0, le=1.0, description="least inlier share of the cluster (right poses measured: >= 0.98)"
+    )
+    max_rmse: float = Field(0.0025, gt=0.0, description="largest inlier RMSE, metres")
+    occlusion_margin: float = Field(0.006, gt=0.0, description="model this far in front of a seen point violates")
+    max_violation: float = Field(
+        0.015, ge=0.0, le=1.0, description="largest share of nearby seen points hidden (right poses: <= 0.005)"
+    )
+    support_tolerance: float = Field(
+        0.004, gt=0.0, description="largest gap or penetration between the model's lowest point and the table"
+    )
+
+
+@dataclass
+class ModelCloud:
+    """Dense surface sample of a part (part frame) with outward normals, and its mesh."""
+
+    points: np.ndarray
+    normals: np.ndarray
+    mesh: trimesh.Trimesh
+    pcd: o3d.geometry.PointCloud
+    radius: float
+    """Largest distance of a surface point from the bounding-box centre, metres."""
+    center: np.ndarray
+    hull_vertices: np.ndarray
+    """(k, 3) convex-hull vertices, part frame (the lowest point of any pose is among them)."""
+    scene: o3d.t.geometry.RaycastingScene
+    """Ray-casting scene of the mesh in the part frame (distances, visibility)."""
+
+
+@dataclass
+class Verdict:
+    """A refined hypothesis and its verification scores."""
+
+    T_world_part: np.ndarray
+    fitness: float
+    inlier_rmse: float
+    violation: float
+    support_gap: float
+    """Height (metres) of the model's lowest point above the table; NaN without a table."""
+    accepted: bool
+    why: str | None = None
+
+    @property
+    def score(self) -> float:
+        """Ranking key: inlier share, less the share of free space the model would fill."""
+        return self.fitness - 2.0 * self.violation
+
+
+def model_cloud(mesh: trimesh.Trimesh, n: int, seed: int = 0) -> ModelCloud:
+    """Evenly spread surface samples of ``mesh`` with face normals (seeded)."""
+    pts, faces = trimesh.sample.sample_surface_even(mesh, n, seed=seed)
+    if len(pts) < n // 2:  # even sampling can reject many; top up uniformly
+        more, more_faces = trimesh.sample.sample_surface(mesh, n - len(pts), seed=seed + 1)
+        pts, faces = np.vstack([pts, more]), np.concatenate([faces, more_faces])
+    normals = np.asarray(mesh.face_normals)[faces]
+    center = np.asarray(mesh.bounds).mean(axis=0)
+    radius = float(np.max(np.linalg.norm(np.asarray(mesh.vertices) - center, axis=1)))
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(np.asarray(mesh.vertices, dtype=np.float32)),
+        o3d.core.Tensor(np.asarray(mesh.faces, dtype=np.uint32)),
+    )
+    hull = np.asarray(mesh.convex_hull.vertices, dtype=float)
+    return ModelCloud(pts, normals, mesh, to_o3d(pts, normals), radius, center, hull, scene)
+
+
+def icp_refine(
+    cluster: np.ndarray,
+    model: ModelCloud,
+    T_world_part: np.ndarray,
+    s: RefineSettings,
+    *,
+    coarse: bool = True,
+    fine: bool = True,
+) -> np.ndarray:
+    """Point-to-plane ICP of the observed ``cluster`` (world) onto the model; returns ``T_world_part``.
+
+    The coarse pass (wide correspondence distance) pulls a hypothesis in; the
+    fine pass (narrow) ignores what is not the part's surface.
+    """
+    src = to_o3d(cluster)
+    T = geometry.invert(T_world_part)  # ICP moves the cluster into the part frame
+    passes = [d for d, on in ((s.icp_coarse_distance, coarse), (s.icp_fine_distance, fine)) if on]
+    for dist in passes:
+        res = reg.registration_icp(
+            src,
+            model.pcd,
+            dist,
+            T,
+            reg.TransformationEstimationPointToPlane(),
+            reg.ICPConvergenceCriteria(relative_fitness=1e-7, relative_rmse=1e-7, max_iteration=s.icp_iterations),
+        )
+        T = np.asarray(res.transformation)
+    return geometry.invert(T)
+
+
+def verify(
+    T_world_part: np.ndarray,
+    cluster: np.ndarray,
+    context: np.ndarray,
+    viewpoint: np.ndarray,
+    model: ModelCloud,
+    s: RefineSettings,
+    table: TablePlane | None = None,
+) -> Verdict:
+    """Score a refined pose against the observed ``cluster`` and the seen points ``context`` near it.
+
+    ``context`` is every observed point (table included, world frame) within
+    reach of the part; ``viewpoint`` is the camera centre (world, metres);
+    ``table`` the supporting plane (no support check without it).
+    """
+    T_part_world = geometry.invert(T_world_part)
+    local = geometry.transform_points(T_part_world, cluster)
+    d = _distances_to_model(local, model)
+    inl = d < s.inlier_distance
+    fitness = float(inl.mean()) if len(d) else 0.0
+    rmse = float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else float("inf")
+
+    violation = _free_space_violation(T_part_world, context, viewpoint, model, s.occlusion_margin)
+    gap = float("nan")
+    if table is not None:
+        n = np.asarray(table.normal, dtype=float)
+        gap = float(np.min(geometry.transform_points(T_world_part, model.hull_vertices) @ n) - table.height)
+    why = None
+    if np.isfinite(gap) and abs(gap) > s.support_tolerance:
+        where = "inside the table" if gap < 0 else "above the table (floating)"
+        why = f"the part would rest {abs(gap) * 1000:.1f} mm {where}"
+    elif fitness < s.min_fitness:
+        why = f"fitness {fitness:.2f} < {s.min_fitness:.2f}"
+    elif rmse > s.max_rmse:
+        why = f"inlier RMSE {rmse * 1000:.2f} mm > {s.max_rmse * 1000:.2f} mm"
+    elif violation > s.max_violation:
+        why = f"the model would hide {100 * violation:.1f}% of the points seen around it"
+    return Verdict(T_world_part, fitness, rmse, violation, gap, why is None, why)
+
+
+def _distances_to_model(local: np.ndarray, model: ModelCloud) -> np.ndarray:
+    """Unsigned distances (metres) of part-frame points to the mesh surface."""
+    res = model.scene.compute_distance(o3d.core.Tensor(local.astype(np.float32)))
+    return res.numpy().astype(float)
+
+
+def _free_space_violation(
+    T_part_world: np.ndarray, context: np.ndarray, viewpoint: np.ndarray, model: ModelCloud, margin: float
+) -> float:
+    """Share of the seen points near the part that the model, at this pose, would hide from the camera."""
+    local = geometry.transform_points(T_part_world, context)
+    near = np.linalg.norm(local - model.center, axis=1) < 1.5 * model.radius + 0.01
+    if not near.any():
+        return 0.0
+    pts = local[near]
+    eye = geometry.transform_points(T_part_world, viewpoint[None])[0]
+    dirs = pts - eye
+    dist = np.linalg.norm(dirs, axis=1)
+    rays = np.hstack([np.repeat(eye[None], len(pts), axis=0), dirs / dist[:, None]]).astype(np.float32)
+    hit = model.scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+    return float(np.mean(hit < dist - margin))

@@ -1,0 +1,1 @@
+"""FPFH + RANSAC + ICP baseline detector (Open3D's global registration)."""
