@@ -24,10 +24,12 @@ from asmteach.core.io import read_yaml
 from asmteach.core.models import AssemblyTask, PartSpec, Primitive, SolidSpec, resolve_relative
 
 __all__ = [
+    "MESH_SUFFIXES",
     "build_part",
     "build_solid",
     "load_mesh_file",
     "load_part_spec",
+    "load_parts",
     "load_structure",
     "mesh_hash",
 ]
@@ -38,6 +40,7 @@ log = logging.getLogger(__name__)
 # above this is almost surely written in millimetres.
 MAX_EXTENT_M = 2.0
 MIN_EXTENT_M = 0.002
+MESH_SUFFIXES = frozenset({".stl", ".obj", ".ply", ".off", ".glb", ".gltf"})
 
 
 def _primitive_mesh(p: Primitive) -> trimesh.Trimesh:
@@ -150,3 +153,47 @@ def load_structure(path: str | Path) -> AssemblyTask:
         if isinstance(raw.get(key), str):
             raw[key] = load_part_spec(resolve_relative(raw[key], base)).model_dump()
     return _validate(AssemblyTask, raw, p)
+
+
+def load_parts(
+    source: str | Path,
+    *,
+    units: str = "m",
+    select: str | None = None,
+    center_of_mass: np.ndarray | None = None,
+) -> list[PartModel]:
+    """Parts named on a command line: a mesh file, a part YAML or a structure YAML.
+
+    A structure gives its two parts, or only ``select`` (``"a"``, ``"b"`` or a
+    part name). ``units`` applies to mesh files; ``center_of_mass`` (part
+    frame, metres) overrides the solid's, for a single part only.
+    """
+    path = Path(source)
+    if not path.is_file():
+        raise UserError(f"{path}: no such file")
+    suffix = path.suffix.lower()
+    if suffix in MESH_SUFFIXES:
+        try:
+            spec = PartSpec(name=path.stem, mesh=str(path.resolve()), mesh_units=units, center_of_mass=center_of_mass)
+        except ValidationError as exc:
+            raise UserError(format_validation_error(exc, "center_of_mass")) from None
+        return [build_part(spec)]
+    if suffix not in (".yaml", ".yml"):
+        raise UserError(f"{path}: not a mesh ({', '.join(sorted(MESH_SUFFIXES))}) nor a part/structure YAML")
+    raw = read_yaml(path)
+    base = path.resolve().parent
+    if isinstance(raw, dict) and "part_a" in raw:
+        if center_of_mass is not None:
+            raise UserError("a centre of mass applies to one part; a structure file has two (set it in its YAML)")
+        task = load_structure(path)
+        specs = {"a": task.part_a, "b": task.part_b}
+        if select is not None:
+            specs = {k: s for k, s in specs.items() if select in (k, s.name)}
+            if not specs:
+                names = f"a ({task.part_a.name}), b ({task.part_b.name})"
+                raise UserError(f"{select!r} is not a part of {path.name}; choose one of {names}")
+        return [build_part(s, base) for s in specs.values()]
+    spec = load_part_spec(path)
+    if center_of_mass is not None:
+        spec = spec.model_copy(update={"center_of_mass": np.asarray(center_of_mass, dtype=float)})
+    return [build_part(spec, base)]

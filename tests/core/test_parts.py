@@ -59,3 +59,21 @@ def test_center_of_mass_outside_hull_is_refused():
 def test_missing_mesh_file(tmp_path):
     with pytest.raises(UserError, match="does not exist"):
         build_part(PartSpec(name="x", mesh=str(tmp_path / "nope.stl")))
+
+
+def test_load_parts_from_structure_part_and_mesh(tmp_path):
+    from asmteach.core.parts import load_parts
+
+    structure = REPO / "configs/parts/set1/peg_in_hole.yaml"
+    assert [p.name for p in load_parts(structure)] == ["holed_block", "round_peg"]
+    assert [p.name for p in load_parts(structure, select="b")] == ["round_peg"]
+    assert [p.name for p in load_parts(structure, select="holed_block")] == ["holed_block"]
+    with pytest.raises(UserError, match="not a part of"):
+        load_parts(structure, select="c")
+    mesh = tmp_path / "block.stl"
+    trimesh.creation.box(extents=[60, 40, 30]).export(mesh)
+    assert load_parts(mesh, units="mm")[0].mesh.extents.max() == pytest.approx(0.06)
+    text = tmp_path / "notes.txt"
+    text.write_text("x")
+    with pytest.raises(UserError, match="nor a part/structure YAML"):
+        load_parts(text)

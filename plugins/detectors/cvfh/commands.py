@@ -29,8 +29,8 @@ from asmteach.core.errors import UserError
 from asmteach.core.hooks import hookimpl
 from asmteach.core.interfaces import Corrector, Detector, PartModel
 from asmteach.core.io import read_yaml, write_json
-from asmteach.core.models import Detection, PartSpec, TablePlane
-from asmteach.core.parts import build_part, load_part_spec, load_structure
+from asmteach.core.models import Detection, TablePlane
+from asmteach.core.parts import load_parts
 
 import open3d as o3d  # isort: skip
 
@@ -38,7 +38,6 @@ __all__ = ["asmteach_add_commands", "detection_report", "load_cloud", "run_detec
 
 log = logging.getLogger(__name__)
 
-MESH_SUFFIXES = {".stl", ".obj", ".ply", ".off", ".glb", ".gltf"}
 
 
 @hookimpl
@@ -200,28 +199,18 @@ def _load_source(args: argparse.Namespace) -> tuple[PartModel, tuple[str, dict],
     table = None
     if not src.is_file():
         raise UserError(f"{src}: no such file")
-    if src.suffix.lower() in MESH_SUFFIXES:
-        part = build_part(PartSpec(name=src.stem, mesh=str(src.resolve()), mesh_units=args.units))
-    elif src.suffix.lower() in {".yaml", ".yml"}:
-        raw = read_yaml(src)
-        if not isinstance(raw, dict):
-            raise UserError(f"{src}: expected a YAML mapping (a part, a structure or a run config)")
-        if "structure" in raw:
-            cfg = load_run_config(src)
-            task = load_structure(cfg.path(cfg.structure))
-            spec = task.part_a if args.part == "a" else task.part_b
-            part = build_part(spec, cfg.path(cfg.structure).parent)
-            det = (cfg.detector.plugin, cfg.detector.settings)
-            cor = (cfg.corrector.plugin, cfg.corrector.settings) if cfg.corrector else None
-            seed = cfg.seed
-            table = TablePlane(height=cfg.table.height)
-        elif "part_a" in raw:
-            task = load_structure(src)
-            part = build_part(task.part_a if args.part == "a" else task.part_b, src.resolve().parent)
-        else:
-            part = build_part(load_part_spec(src), src.resolve().parent)
+    raw = read_yaml(src) if src.suffix.lower() in {".yaml", ".yml"} else None
+    if isinstance(raw, dict) and "structure" in raw:
+        cfg = load_run_config(src)
+        part = load_parts(cfg.path(cfg.structure), select=args.part)[0]
+        det = (cfg.detector.plugin, cfg.detector.settings)
+        cor = (cfg.corrector.plugin, cfg.corrector.settings) if cfg.corrector else None
+        seed = cfg.seed
+        table = TablePlane(height=cfg.table.height)
+    elif raw is not None and not isinstance(raw, dict):
+        raise UserError(f"{src}: expected a YAML mapping (a part, a structure or a run config)")
     else:
-        raise UserError(f"{src}: give a mesh (.stl/.obj/.ply/.off) or a YAML part, structure or run config")
+        part = load_parts(src, units=args.units, select=args.part)[0]
     if args.seed is not None:
         seed = args.seed
     return part, det, cor, seed, table

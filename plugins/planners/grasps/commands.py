@@ -21,15 +21,15 @@ from asmteach.core.errors import UserError
 from asmteach.core.hooks import hookimpl
 from asmteach.core.interfaces import PartModel
 from asmteach.core.io import read_yaml, write_json
-from asmteach.core.models import HandSpec, PartSpec
-from asmteach.core.parts import build_part, load_part_spec, load_structure
+from asmteach.core.models import HandSpec
+from asmteach.core.parts import MESH_SUFFIXES
+from asmteach.core.parts import load_parts as load_library_parts
 from asmteach.plugins.planners.grasps.checks import check_mesh
 from asmteach.plugins.planners.grasps.planner import AntipodalGraspPlanner, AntipodalSettings
 from asmteach.plugins.planners.grasps.render import render_grasps
 
 __all__ = ["asmteach_add_commands", "load_hand", "load_parts", "run_grasps"]
 
-MESH_SUFFIXES = {".stl", ".obj", ".ply", ".off", ".glb", ".gltf"}
 
 
 def load_hand(spec: str) -> HandSpec:
@@ -49,7 +49,7 @@ def load_hand(spec: str) -> HandSpec:
         raise UserError(f"{path}: {format_validation_error(exc)}") from None
 
 
-def _mesh_part(path: Path, units: str) -> PartModel:
+def _check_mesh_file(path: Path, units: str) -> None:
     try:
         raw = trimesh.load(path, force="mesh")
     except Exception as exc:  # noqa: BLE001 - any loader failure is a bad file
@@ -60,32 +60,14 @@ def _mesh_part(path: Path, units: str) -> PartModel:
         raw.apply_scale(0.001)
     # Checked before the part loader, which would quietly replace an open shell by its hull.
     check_mesh(raw, path.stem)
-    return build_part(PartSpec(name=path.stem, mesh=str(path.resolve()), mesh_units=units))
 
 
 def load_parts(source: str, units: str = "m", part: str | None = None) -> list[PartModel]:
     """Parts named by ``source`` (mesh file, part YAML or structure YAML), optionally only ``part``."""
     path = Path(source)
-    if not path.is_file():
-        raise UserError(f"{source}: no such file")
-    suffix = path.suffix.lower()
-    if suffix in MESH_SUFFIXES:
-        return [_mesh_part(path, units)]
-    if suffix not in {".yaml", ".yml"}:
-        raise UserError(f"{source}: expected a mesh ({', '.join(sorted(MESH_SUFFIXES))}) or a part/structure YAML")
-    raw = read_yaml(path)
-    if isinstance(raw, dict) and "part_a" in raw:
-        task = load_structure(path)
-        specs = {"a": task.part_a, "b": task.part_b}
-        if part is not None:
-            chosen = [s for key, s in specs.items() if part in (key, s.name)]
-            if not chosen:
-                names = ", ".join(f"{k} ({s.name})" for k, s in specs.items())
-                raise UserError(f"--part {part!r} is not a part of {path.name}; choose one of {names}")
-            specs = {"x": chosen[0]}
-        return [build_part(s, path.resolve().parent) for s in specs.values()]
-    spec = load_part_spec(path)
-    return [build_part(spec, path.resolve().parent)]
+    if path.is_file() and path.suffix.lower() in MESH_SUFFIXES:
+        _check_mesh_file(path, units)
+    return load_library_parts(source, units=units, select=part)
 
 
 def _entry(g: Any) -> dict[str, Any]:

@@ -15,47 +15,19 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pydantic import ValidationError
 
-from asmteach.core.config import format_validation_error
-from asmteach.core.errors import UserError
 from asmteach.core.hooks import hookimpl
 from asmteach.core.interfaces import PartModel
-from asmteach.core.io import read_yaml, write_json
-from asmteach.core.models import PartSpec
-from asmteach.core.parts import build_part, load_part_spec, load_structure
+from asmteach.core.io import write_json
+from asmteach.core.parts import load_parts as load_library_parts
 from asmteach.plugins.planners.placements.contact_sheet import render_contact_sheet
 from asmteach.plugins.planners.placements.planner import PlacementResult, placement_result
 
 __all__ = ["asmteach_add_commands", "load_parts"]
 
-MESH_SUFFIXES = {".stl", ".obj", ".ply", ".off", ".glb", ".gltf"}
-
-
 def load_parts(source: str | Path, *, units: str = "m", com: list[float] | None = None) -> list[PartModel]:
     """Parts named by ``source``: a mesh file, a part YAML or a structure YAML (its two parts)."""
-    path = Path(source)
-    if not path.exists():
-        raise UserError(f"{path}: no such file")
-    suffix = path.suffix.lower()
-    if suffix in (".yaml", ".yml"):
-        raw = read_yaml(path)
-        if isinstance(raw, dict) and "part_a" in raw:
-            if com is not None:
-                raise UserError("--com applies to one part; a structure file has two (set center_of_mass in its YAML)")
-            task = load_structure(path)
-            return [build_part(spec, path.resolve().parent) for spec in (task.part_a, task.part_b)]
-        spec = load_part_spec(path)
-        if com is not None:
-            spec = spec.model_copy(update={"center_of_mass": np.asarray(com, dtype=float)})
-        return [build_part(spec, path.resolve().parent)]
-    if suffix not in MESH_SUFFIXES:
-        raise UserError(f"{path}: not a mesh ({', '.join(sorted(MESH_SUFFIXES))}) nor a part/structure YAML")
-    try:
-        spec = PartSpec(name=path.stem, mesh=str(path.resolve()), mesh_units=units, center_of_mass=com)
-    except ValidationError as exc:
-        raise UserError(format_validation_error(exc, "--com")) from None
-    return [build_part(spec)]
+    return load_library_parts(source, units=units, center_of_mass=None if com is None else np.asarray(com, float))
 
 
 def _part_record(part: PartModel, result: PlacementResult) -> dict[str, Any]:
