@@ -32,3 +32,14 @@ def test_library_contact_sheet(tmp_path, capsys):
     assert main(["library", str(repo / "configs/parts/set1"), "--out", str(out)]) == 0
     assert out.stat().st_size > 10_000 and out.read_bytes()[:4] == b"\x89PNG"
     assert main(["library", str(tmp_path), "--out", str(out)]) == 2
+
+
+def test_written_files_are_readable_like_ordinary_files(tmp_path):
+    import os
+
+    from asmteach.core.io import write_text
+
+    path = write_text(tmp_path / "a.txt", "x")
+    umask = os.umask(0)
+    os.umask(umask)
+    assert path.stat().st_mode & 0o777 == 0o666 & ~umask
