@@ -1,16 +1,21 @@
-"""Motion planner benchmark: T-RRT against RRTConnect on the 6-D toy problem.
+"""Motion planner benchmark: T-RRT (BiTRRT) against RRTConnect on the 6-D toy problem.
 
 The problem (``toyworld.clutter6d``): joints in [-pi, pi], a wall across joint 0
 with a 2.5 rad square hole, a ball and a box, obstacles padded by 0.02 rad,
 motions checked every 0.02 rad; the straight line start -> goal is blocked.
 Each planner runs ``--trials`` queries with seeds 0..n-1 and the inverse
-clearance cost map (the one the assembly planner passes). Reported per
-planner: success rate, median / 90th percentile planning time (s), median path
-length (rad), median mean and maximum path cost (1 / clearance along the path
-every 0.01 rad; lower is safer), and the minimum clearance (rad) to the
-unpadded obstacles. Writes ``motion_planners.json`` and ``motion_planners.png``.
+clearance cost map ``1 / max(clearance, 1e-3)``. Both planners get the same
+callables, which carry vectorised twins (``.batch``, see
+``plugins/planners/motion/batch.py``): T-RRT uses them for whole-edge checks
+and its shortener, RRTConnect (OMPL) calls them one state at a time. The row
+``trrt_1by1`` runs T-RRT on plain callables (OMPL motion checks and simplifier)
+for comparison. Reported per planner: success rate, median / 90th percentile
+total time per query (s, planning plus simplification), median path length
+(rad), median mean and maximum path cost (1 / clearance along the path every
+0.01 rad; lower is safer), and the minimum clearance (rad) to the unpadded
+obstacles. Writes ``motion_planners.json`` and ``motion_planners.png``.
 
-Run: .venv/bin/python benchmarks/motion_planners.py [--trials 30] [--time-limit 10] [--out DIR] [--no-cost]
+Run: .venv/bin/python benchmarks/motion_planners.py [--trials 100] [--time-limit 10] [--out DIR] [--no-cost]
 """
 
 from __future__ import annotations
@@ -22,16 +27,23 @@ from pathlib import Path
 import numpy as np
 
 from asmteach.core.io import atomic_path, write_json
+from asmteach.plugins.planners.motion.batch import batched
 from asmteach.plugins.planners.motion.interpolate import densify
 from asmteach.plugins.planners.motion.ompl_planners import RRTConnectPlanner
 from asmteach.plugins.planners.motion.toyworld import JointWorld, clutter6d
 from asmteach.plugins.planners.motion.trrt import TRRTPlanner, inverse_clearance_cost
 
 
-def run(planner_cls: type, trials: int, time_limit: float, use_cost: bool = True) -> list[dict]:
+def run(
+    planner_cls: type, trials: int, time_limit: float, use_cost: bool = True, vectorised: bool = True
+) -> list[dict]:
     world, start, goal = clutter6d(margin=0.02)
     exact = JointWorld(world.lower, world.upper, world.obstacles, margin=0.0)
-    cost = inverse_clearance_cost(world.clearance)
+    if vectorised:
+        is_valid = batched(world.is_valid, world.valid_batch)
+        cost = inverse_clearance_cost(batched(world.clearance, world.clearance_batch))
+    else:
+        is_valid, cost = world.is_valid, inverse_clearance_cost(world.clearance)
     rows = []
     for seed in range(trials):
         planner = planner_cls({"collision_resolution": 0.02}, seed=seed)
@@ -41,7 +53,7 @@ def run(planner_cls: type, trials: int, time_limit: float, use_cost: bool = True
             goal,
             lower=world.lower,
             upper=world.upper,
-            is_valid=world.is_valid,
+            is_valid=is_valid,
             cost=cost if use_cost else None,
             time_limit=time_limit,
         )
@@ -83,7 +95,7 @@ def summarize(rows: list[dict]) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--trials", type=int, default=30)
+    ap.add_argument("--trials", type=int, default=100)
     ap.add_argument("--time-limit", type=float, default=10.0)
     ap.add_argument("--out", type=Path, default=Path("benchmarks/out"))
     ap.add_argument(
@@ -91,8 +103,12 @@ def main() -> None:
     )
     args = ap.parse_args()
     results = {}
-    for name, cls in (("trrt", TRRTPlanner), ("rrtconnect", RRTConnectPlanner)):
-        rows = run(cls, args.trials, args.time_limit, use_cost=not args.no_cost)
+    for name, cls, vectorised in (
+        ("trrt", TRRTPlanner, True),
+        ("trrt_1by1", TRRTPlanner, False),
+        ("rrtconnect", RRTConnectPlanner, True),
+    ):
+        rows = run(cls, args.trials, args.time_limit, use_cost=not args.no_cost, vectorised=vectorised)
         results[name] = {"summary": summarize(rows), "rows": rows}
         s = results[name]["summary"]
         print(

@@ -81,7 +81,7 @@ class RRTConnectPlanner(MotionPlanner):
             stats.update(validity_checks=space.n_checks, time=time.perf_counter() - t0)
             return failure(FailureKind.TIMEOUT, f"after {time_limit} s", **stats)
         raw = space.from_path(problem.getSolutionPath())
-        path = finish_path(space, raw, cfg, cost)
+        path = finish_path(space, raw, cfg)  # cost-blind planner: plain shortcutting
         stats.update(
             raw_waypoints=len(raw),
             raw_length=float(np.sum(np.linalg.norm(np.diff(raw, axis=0), axis=1))),

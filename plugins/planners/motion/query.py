@@ -50,9 +50,10 @@ class MotionSettings(StrictModel):
     )
     simplify: bool = Field(True, description="Shorten the found path with OMPL's og.PathSimplifier.")
     simplify_max_time: float | None = Field(
-        None,
+        0.5,
         gt=0,
-        description="Seconds for the simplifier; None runs simplifyMax until no change (deterministic).",
+        description="Seconds for the simplifier; None runs simplifyMax until no change (deterministic, but "
+        "slow with a real robot's collision checks).",
     )
 
 
