@@ -13,9 +13,16 @@ tables and plots. An *experiment file* (YAML) picks the kind and the grid::
     workers: 2                         # local processes (default: 1)
 
 ``asmteach sweep FILE --out DIR`` appends one JSON line per finished trial to
-``DIR/trials.jsonl`` (fsynced), skips trials already there when re-run (so a
-crash or Ctrl-C loses at most the trials in flight), and writes
-``summary.csv``, ``summary.md`` and the kind's own figures atomically.
+``DIR/trials.jsonl`` (fsynced), skips trials already there when re-run, and
+writes ``trials.csv``, ``summary.csv``, ``summary.md`` and the kind's own
+figures atomically; a kind that draws no figure of its own gets the generic
+``summary.png`` (each numeric metric against the grid key with most values).
+
+Ctrl-C: the first one stops starting trials and waits for those in flight,
+recording them, so nothing computed is lost (the Ray executor cancels its
+trials in flight instead); a second one abandons the trials in flight. Either
+way ``trials.jsonl`` stays valid and a re-run does exactly the missing trials.
+A hard crash can tear the last line, which readers skip.
 """
 
 from __future__ import annotations
@@ -28,22 +35,29 @@ import io
 import itertools
 import json
 import math
+import os
+import signal
 import sys
+import threading
 import time
 import traceback
 from collections.abc import Iterable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from importlib import metadata
 from pathlib import Path
-from typing import Any, ClassVar
+from types import FrameType
+from typing import TYPE_CHECKING, Any, ClassVar
 
 from pydantic import Field, ValidationError
 
 from asmteach.core.config import format_validation_error, set_dotted
 from asmteach.core.errors import UserError
-from asmteach.core.io import append_jsonl, read_jsonl, read_yaml, write_json, write_text
+from asmteach.core.io import append_jsonl, atomic_path, read_jsonl, read_yaml, write_json, write_text
 from asmteach.core.models import StrictModel, resolve_relative
 from asmteach.core.registry import closest
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = [
     "Experiment",
@@ -52,6 +66,8 @@ __all__ = [
     "add_sweep_command",
     "load_experiment",
     "run_sweep",
+    "summary_figure",
+    "summary_plot",
 ]
 
 GROUP = "asmteach.experiments"
@@ -67,6 +83,12 @@ class Experiment(abc.ABC):
 
     Params: ClassVar[type[StrictModel]]
     """Validated parameters of one trial; grid keys are dotted paths into it."""
+
+    plot_metrics: ClassVar[tuple[str, ...]] = ()
+    """Metrics drawn in the generic ``summary.png`` (at most six); empty: the first numeric ones.
+
+    Only used when :meth:`summarize` writes no figure of its own.
+    """
 
     def __init__(self, base_dir: Path) -> None:
         self.base_dir = base_dir
@@ -227,57 +249,152 @@ def run_sweep(
     args = [(exp.experiment, base_dir, exp.model_dump_json(), t.model_dump_json(), str(out)) for t in todo]
     n_workers = workers or exp.workers
     bar = _Bar(len(todo), f"{exp.experiment} ({len(done)} done before)", enabled=progress)
-    try:
-        if executor == "ray":
-            _run_ray(args, log_path, bar)
-        elif n_workers <= 1:
-            for a in args:
-                row = _run_one(*a)
-                append_jsonl(log_path, row)
-                bar.advance(row)
-        else:
-            _run_pool(args, log_path, bar, n_workers)
-    finally:
-        bar.close()
+    with _GracefulInterrupt() as interrupt:
+        try:
+            if executor == "ray":
+                _run_ray(args, log_path, bar, interrupt, n_workers)
+            elif n_workers <= 1:
+                _run_serial(args, log_path, bar, interrupt)
+            else:
+                _run_pool(args, log_path, bar, interrupt, n_workers)
+        finally:
+            bar.close()
     rows = read_jsonl(log_path)
-    summarize(rows, out, kind(Path(base_dir)))
+    summarize(rows, out, kind(Path(base_dir)), title=exp.experiment)
     return rows
 
 
-def _run_pool(args: list[tuple[Any, ...]], log_path: Path, bar: _Bar, n_workers: int) -> None:
-    with ProcessPoolExecutor(max_workers=n_workers) as pool:
-        pending: set[Future[dict[str, Any]]] = set()
-        queue = list(args)
-        try:
-            while queue or pending:
-                while queue and len(pending) < 2 * n_workers:
-                    pending.add(pool.submit(_run_one, *queue.pop(0)))
-                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for fut in finished:
-                    row = fut.result()
-                    append_jsonl(log_path, row)
-                    bar.advance(row)
-        except KeyboardInterrupt:
-            for fut in pending:
-                fut.cancel()
-            raise
+class _GracefulInterrupt:
+    """Ctrl-C as a request checked between trials, so a finished trial is always recorded whole.
+
+    The first SIGINT sets :attr:`requested`; the executors then stop starting
+    trials, record those in flight and raise :class:`KeyboardInterrupt`. A
+    second SIGINT raises at once (abandoning the trials in flight). Outside
+    the main thread signals cannot be caught, so this does nothing there.
+    """
+
+    def __init__(self) -> None:
+        self.count = 0
+        self._previous: Any = None
+        self._active = False
+
+    @property
+    def requested(self) -> bool:
+        return self.count > 0
+
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
+        self.count += 1
+        if self.count == 1:
+            print(
+                "\ninterrupted: finishing the trials in flight (Ctrl-C again to abandon them)",
+                file=sys.stderr,
+                flush=True,
+            )
+            return
+        raise KeyboardInterrupt
+
+    def __enter__(self) -> _GracefulInterrupt:
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+            self._active = True
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._active:
+            signal.signal(signal.SIGINT, self._previous)
 
 
-def _run_ray(args: list[tuple[Any, ...]], log_path: Path, bar: _Bar) -> None:
+def _record(log_path: Path, bar: _Bar, row: dict[str, Any]) -> None:
+    append_jsonl(log_path, row)
+    bar.advance(row)
+
+
+def _run_serial(args: list[tuple[Any, ...]], log_path: Path, bar: _Bar, interrupt: _GracefulInterrupt) -> None:
+    for a in args:
+        if interrupt.requested:
+            raise KeyboardInterrupt
+        _record(log_path, bar, _run_one(*a))
+    if interrupt.requested:
+        raise KeyboardInterrupt
+
+
+def _ignore_sigint() -> None:
+    """Pool-worker initializer: Ctrl-C reaches the whole process group, but only the parent decides."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _terminate_workers(pool: ProcessPoolExecutor) -> None:
+    """Kill the pool's worker processes (they ignore SIGINT, and shutdown would wait for them)."""
+    terminate = getattr(pool, "terminate_workers", None)  # public from Python 3.14
+    if terminate is not None:
+        terminate()
+        return
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        proc.terminate()
+
+
+def _run_pool(
+    args: list[tuple[Any, ...]], log_path: Path, bar: _Bar, interrupt: _GracefulInterrupt, n_workers: int
+) -> None:
+    pool = ProcessPoolExecutor(max_workers=n_workers, initializer=_ignore_sigint)
+    pending: set[Future[dict[str, Any]]] = set()
+    queue = list(args)
+    try:
+        while pending or (queue and not interrupt.requested):
+            if interrupt.requested:
+                # Not-yet-started trials are dropped (a re-run does them); started ones refuse
+                # to cancel, stay pending and are recorded below as they finish.
+                pending = {f for f in pending if not f.cancel()}
+                queue.clear()
+            while queue and len(pending) < 2 * n_workers:
+                pending.add(pool.submit(_run_one, *queue.pop(0)))
+            # A timeout so that a Ctrl-C is noticed while trials run.
+            finished, pending = wait(pending, timeout=0.25, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                if not fut.cancelled():
+                    _record(log_path, bar, fut.result())
+    except KeyboardInterrupt:
+        _terminate_workers(pool)
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+    if interrupt.requested:
+        raise KeyboardInterrupt
+
+
+def _run_ray(
+    args: list[tuple[Any, ...]], log_path: Path, bar: _Bar, interrupt: _GracefulInterrupt, n_workers: int
+) -> None:
+    """Trials as Ray tasks: a local Ray instance, or the cluster named by ``RAY_ADDRESS``."""
+    if not args:
+        return
     try:
         import ray
     except ImportError:
         raise UserError("--executor ray needs Ray: pip install 'asmteach[ray]'") from None
-    if not ray.is_initialized():
-        ray.init(ignore_reinit_error=True, log_to_driver=False)
-    remote = ray.remote(_run_one)
+    started_here = not ray.is_initialized()
+    if started_here:
+        if os.environ.get("RAY_ADDRESS"):
+            ray.init(log_to_driver=False)
+        else:
+            # A private local instance sized like the process pool; no dashboard to serve.
+            ray.init(num_cpus=n_workers, include_dashboard=False, log_to_driver=False)
+    remote = ray.remote(num_cpus=1)(_run_one)
     refs = [remote.remote(*a) for a in args]
-    while refs:
-        ready, refs = ray.wait(refs, num_returns=1)
-        for ref in ready:
-            row = ray.get(ref)
-            append_jsonl(log_path, row)
-            bar.advance(row)
+    try:
+        while refs:
+            if interrupt.requested:
+                # Ray does not say which queued tasks have started, so all unfinished ones are
+                # cancelled; a re-run does them.
+                for ref in refs:
+                    ray.cancel(ref)
+                raise KeyboardInterrupt
+            ready, refs = ray.wait(refs, num_returns=1, timeout=0.25)
+            for ref in ready:
+                _record(log_path, bar, ray.get(ref))
+    finally:
+        if started_here:
+            ray.shutdown()
 
 
 class _Bar:
@@ -382,8 +499,11 @@ def to_markdown(records: list[dict[str, Any]], cols: list[str] | None = None) ->
     return "\n".join(lines) + "\n"
 
 
-def summarize(rows: list[dict[str, Any]], out: Path, kind: Experiment) -> list[Path]:
-    """Generic summary (per-trial CSV, per-point table) plus the kind's own outputs."""
+def summarize(rows: list[dict[str, Any]], out: Path, kind: Experiment, *, title: str = "") -> list[Path]:
+    """Generic summary (per-trial CSV, per-point table) plus the kind's own outputs.
+
+    When the kind writes no figure, the generic :func:`summary_plot` is added.
+    """
     keys = list(dict.fromkeys(k for r in rows for k in r.get("point", {})))
     flat = [flatten(r) for r in rows]
     table = group_table(rows, keys)
@@ -391,8 +511,14 @@ def summarize(rows: list[dict[str, Any]], out: Path, kind: Experiment) -> list[P
         write_text(out / "trials.csv", to_csv(flat)),
         write_text(out / "summary.csv", to_csv(table)),
     ]
+    own = list(kind.summarize(rows, out) or [])
+    plot = None
+    if not any(Path(p).suffix.lower() in IMAGE_SUFFIXES for p in own):
+        plot = summary_plot(rows, out, title=title or type(kind).__name__, metrics=kind.plot_metrics)
     n_ok = sum(bool(r.get("ok")) for r in rows)
     md = f"# Sweep summary\n\n{len(rows)} trials, {n_ok} succeeded.\n\n" + to_markdown(table)
+    if plot is not None:
+        md += f"\n![summary]({plot.name})\n"
     failures = [r for r in rows if not r.get("ok")]
     if failures:
         md += "\n## Failed trials\n\n" + to_markdown(
@@ -402,8 +528,160 @@ def summarize(rows: list[dict[str, Any]], out: Path, kind: Experiment) -> list[P
             ]
         )
     paths.append(write_text(out / "summary.md", md))
-    paths += kind.summarize(rows, out) or []
-    return paths
+    return paths + own + ([plot] if plot is not None else [])
+
+
+# ---------------------------------------------------------------- generic plot
+IMAGE_SUFFIXES = frozenset({".png", ".svg", ".pdf", ".jpg", ".jpeg", ".gif"})
+MAX_PLOT_METRICS = 6
+MAX_PLOT_SERIES = 6
+
+
+def _label(v: Any, width: int = 18) -> str:
+    text = json.dumps(v, default=str) if isinstance(v, list | dict) else str(v)
+    return text if len(text) <= width else text[: width - 1] + "…"
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def plot_columns(
+    rows: list[dict[str, Any]], preferred: Iterable[str] = (), limit: int = MAX_PLOT_METRICS
+) -> list[str]:
+    """Metrics worth a panel: numeric (not bool) in at least one successful trial.
+
+    The ``preferred`` ones that are numeric come first, in their order; without
+    them, the numeric metrics in first-seen order. Falls back to
+    ``["seconds"]`` (trial wall time) when no metric is numeric.
+    """
+    numeric = list(
+        dict.fromkeys(k for r in rows if r.get("ok") for k, v in (r.get("metrics") or {}).items() if _is_number(v))
+    )
+    chosen = [k for k in dict.fromkeys(preferred) if k in numeric] or numeric
+    return chosen[:limit] if chosen else ["seconds"]
+
+
+def plot_axis_key(rows: list[dict[str, Any]]) -> str | None:
+    """The grid key with the most distinct values (file order breaks ties); None without a grid."""
+    keys = list(dict.fromkeys(k for r in rows for k in r.get("point", {})))
+    if not keys:
+        return None
+    counts = {k: len({json.dumps(r.get("point", {}).get(k), default=str) for r in rows}) for k in keys}
+    return max(keys, key=lambda k: counts[k])
+
+
+def series_stats(xs: list[float], ys: list[float]) -> tuple[Any, Any, Any, Any]:
+    """Per distinct x (ascending): the median and the 25th and 75th percentiles of y.
+
+    Returns ``(x, median, q25, q75)``, each a ``(k,)`` float array.
+    """
+    import numpy as np
+
+    x = np.asarray(xs, dtype=float)
+    y = np.asarray(ys, dtype=float)
+    ux = np.unique(x)
+    q = np.array([np.percentile(y[x == u], [50.0, 25.0, 75.0]) for u in ux]).reshape(-1, 3)
+    return ux, q[:, 0], q[:, 1], q[:, 2]
+
+
+def _metric_value(row: dict[str, Any], col: str) -> Any:
+    return row.get("seconds") if col == "seconds" else (row.get("metrics") or {}).get(col)
+
+
+def summary_figure(rows: list[dict[str, Any]], *, title: str = "", metrics: Iterable[str] = ()) -> Figure | None:
+    """The generic sweep figure, or None when there is nothing to draw.
+
+    One panel per numeric metric (:func:`plot_columns`, ``metrics`` first;
+    successful trials only) against the grid key with most values (:func:`plot_axis_key`). A
+    numeric key gives the median line with its inter-quartile band and the
+    trials as dots, one line per combination of the other grid keys (pooled
+    when there are more than six); a categorical key (or none) gives box
+    plots pooled over the other keys. If any trial failed, a first panel
+    shows the success rate per key value.
+    """
+    import numpy as np
+    from matplotlib.figure import Figure
+
+    if not rows:
+        return None
+    x_key = plot_axis_key(rows)
+    xs_all = [r.get("point", {}).get(x_key) for r in rows] if x_key else ["all"] * len(rows)
+    numeric_x = x_key is not None and all(_is_number(v) for v in xs_all)
+    other = [k for k in dict.fromkeys(k for r in rows for k in r.get("point", {})) if k != x_key]
+    series_of = [", ".join(f"{k}={_label(r.get('point', {}).get(k))}" for k in other) for r in rows]
+    pooled = len(set(series_of)) > MAX_PLOT_SERIES
+    if pooled or not numeric_x:
+        series_of = [""] * len(rows)
+    cols = plot_columns(rows, metrics)
+    if not any(_is_number(_metric_value(r, c)) for r in rows if r.get("ok") for c in cols):
+        cols = []
+    any_failed = not all(r.get("ok") for r in rows)
+    panels = (["success rate"] if any_failed else []) + cols
+    if not panels:
+        return None
+
+    ncols = min(3, len(panels))
+    nrows = math.ceil(len(panels) / ncols)
+    fig = Figure(figsize=(4.4 * ncols, 3.4 * nrows), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    categories = list(dict.fromkeys(json.dumps(v, default=str) for v in xs_all))
+    for ax, panel in zip(axes, panels, strict=False):
+        is_rate = panel == "success rate"
+        pts = [
+            (x, s, 1.0 if r.get("ok") else 0.0) if is_rate else (x, s, _metric_value(r, panel))
+            for x, s, r in zip(xs_all, series_of, rows, strict=True)
+            if is_rate or (r.get("ok") and _is_number(_metric_value(r, panel)))
+        ]
+        if numeric_x:
+            for name in dict.fromkeys(s for _, s, _ in pts):
+                px = [float(x) for x, s, _ in pts if s == name]
+                py = [float(y) for _, s, y in pts if s == name]
+                ux, med, q25, q75 = series_stats(px, py)
+                if is_rate:
+                    med = np.array([np.mean([y for x, y in zip(px, py, strict=True) if x == u]) for u in ux])
+                (line,) = ax.plot(ux, med, marker="o", label=name or None)
+                if not is_rate:
+                    ax.fill_between(ux, q25, q75, color=line.get_color(), alpha=0.25, linewidth=0)
+                    ax.scatter(px, py, s=8, color=line.get_color(), alpha=0.35)
+            if any(s for _, s, _ in pts):
+                ax.legend(fontsize="x-small")
+        else:
+            data = [[float(y) for x, _, y in pts if json.dumps(x, default=str) == c] for c in categories]
+            labels = [_label(json.loads(c)) for c in categories]
+            if is_rate:
+                ax.bar(range(1, len(data) + 1), [sum(d) / len(d) if d else 0.0 for d in data])
+                ax.set_xticks(range(1, len(data) + 1), labels)
+            else:
+                keep = [i for i, d in enumerate(data) if d]
+                ax.boxplot([data[i] for i in keep], positions=[i + 1 for i in keep], widths=0.6)
+                ax.set_xticks(range(1, len(data) + 1), labels)
+            if len(categories) > 4:
+                ax.tick_params(axis="x", labelrotation=30)
+        if is_rate:
+            ax.set_ylim(-0.05, 1.05)
+        ax.set_title(panel + (" (s)" if panel == "seconds" else ""), fontsize="medium")
+        ax.set_xlabel(x_key or "")
+        ax.grid(alpha=0.3)
+    for ax in axes[len(panels) :]:
+        ax.set_visible(False)
+    n_ok = sum(bool(r.get("ok")) for r in rows)
+    note = f"; pooled over {', '.join(other)}" if other and (pooled or not numeric_x) else ""
+    fig.suptitle(f"{title}: {len(rows)} trials, {n_ok} ok{note}" if title else f"{len(rows)} trials{note}")
+    return fig
+
+
+def summary_plot(
+    rows: list[dict[str, Any]], out: Path, *, title: str = "", metrics: Iterable[str] = ()
+) -> Path | None:
+    """Write :func:`summary_figure` to ``out/summary.png`` atomically; None when there is nothing to draw."""
+    fig = summary_figure(rows, title=title, metrics=metrics)
+    if fig is None:
+        return None
+    path = Path(out) / "summary.png"
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    return path
 
 
 # ---------------------------------------------------------------- CLI
