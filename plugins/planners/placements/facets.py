@@ -8,21 +8,164 @@ angle between face normals: adjacent faces whose normals differ by less than
 ``angle_tol`` from their mean (a finely tessellated curve chaining up) is
 split again by region growing from its largest face.
 
+The hull comes straight from qhull (:class:`scipy.spatial.ConvexHull`): its
+facet planes give exact outward normals (the triangles of one qhull facet
+share its plane, so exactly coplanar faces cluster exactly) and its neighbour
+table gives the face adjacency, so no mesh bookkeeping is needed; a
+:class:`trimesh.Trimesh` view is built only when asked for.
+
 Everything is in the part frame, metres. Normals point out of the hull.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import trimesh
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
+from scipy.spatial import ConvexHull, QhullError
 
 from asmteach.core.errors import UserError
 
-__all__ = ["SupportFacets", "convex_hull", "support_facets"]
+__all__ = ["Hull", "SupportFacets", "convex_hull", "cross", "is_closed", "support_facets"]
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of ``(..., 3)`` arrays.
+
+    The same as :func:`numpy.cross`, whose axis handling costs tens of
+    microseconds per call: more than the arithmetic on a small hull.
+    """
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+@dataclass
+class Hull:
+    """A convex hull as plain arrays (part frame, metres).
+
+    Attributes
+    ----------
+    vertices : ``(V, 3) float`` hull vertices.
+    faces : ``(F, 3) int`` triangles, counter-clockwise seen from outside.
+    normals : ``(F, 3) float`` outward unit normal of each face (its qhull facet plane).
+    areas : ``(F,) float`` face areas, m^2 (0 for the slivers qhull's triangulation may leave).
+    neighbors : ``(F, 3) int`` face across the directed edge ``faces[:, k] -> faces[:, (k + 1) % 3]``.
+    volume : m^3.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+    areas: np.ndarray
+    neighbors: np.ndarray
+    volume: float
+
+    @cached_property
+    def mesh(self) -> trimesh.Trimesh:
+        """The hull as a watertight :class:`trimesh.Trimesh` (built on first use)."""
+        return trimesh.Trimesh(self.vertices, self.faces, face_normals=self.normals, process=False)
+
+    @cached_property
+    def center_mass(self) -> np.ndarray:
+        """``(3,)`` centroid of the solid hull (uniform density), metres."""
+        tri = self.vertices[self.faces]
+        origin = self.vertices.mean(axis=0)
+        # Tetrahedra from an interior point: signed volume and centroid of each.
+        vol = np.einsum("ij,ij->i", tri[:, 0] - origin, cross(tri[:, 1] - origin, tri[:, 2] - origin)) / 6.0
+        cen = (tri.sum(axis=1) + origin) / 4.0
+        return (vol @ cen) / vol.sum()
+
+
+def is_closed(faces: np.ndarray) -> bool:
+    """True when every edge of the triangles ``faces`` (``(F, 3) int``) is shared by exactly two faces.
+
+    The same test as :attr:`trimesh.Trimesh.is_watertight`, on plain arrays (no mesh caches to fill).
+    """
+    faces = np.asarray(faces, dtype=np.int64)
+    if len(faces) == 0:
+        return False
+    e = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    key = e[:, 0] * (int(faces.max()) + 1) + e[:, 1]
+    _, counts = np.unique(key, return_counts=True)
+    return bool(np.all(counts == 2))
+
+
+def _orient(simplices: np.ndarray, neighbors: np.ndarray, normals: np.ndarray, points: np.ndarray,
+            scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Wind qhull's triangles counter-clockwise about their outward facet normal.
+
+    Returns faces, face areas and the face across each directed edge. qhull's
+    ``neighbors[f, i]`` is the face opposite vertex ``i``, so edge ``(0, 1)``
+    borders ``neighbors[f, 2]`` and so on; flipping a face swaps two columns
+    of both arrays. Zero-area slivers have no winding of their own: they take
+    the one that agrees with their neighbours across their edges.
+    """
+    faces = simplices.astype(np.int64, copy=True)
+    nb = neighbors.astype(np.int64, copy=True)
+    tri = points[faces]
+    c = cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    areas = 0.5 * np.linalg.norm(c, axis=1)
+    flip = np.einsum("ij,ij->i", c, normals) < 0.0
+    faces[flip] = faces[flip][:, [0, 2, 1]]
+    nb[flip] = nb[flip][:, [0, 2, 1]]
+    edge_nb = nb[:, [2, 0, 1]]
+    sliver = areas <= 1e-12 * scale * scale
+    for _ in range(8 if sliver.any() else 0):
+        # Directed edge a -> b of face f agrees with its neighbour g when g holds b -> a.
+        a, b = faces, np.roll(faces, -1, axis=1)
+        g = faces[edge_nb]  # (F, 3 edges, 3 vertices of g)
+        g_next = np.roll(g, -1, axis=2)
+        agree = np.any((g == b[:, :, None]) & (g_next == a[:, :, None]), axis=2)
+        bad = sliver & ~np.all(agree, axis=1) & ~np.any(agree, axis=1)
+        if not bad.any():
+            break
+        faces[bad] = faces[bad][:, [0, 2, 1]]
+        nb[bad] = nb[bad][:, [0, 2, 1]]
+        edge_nb = nb[:, [2, 0, 1]]
+    return faces, areas, edge_nb
+
+
+def convex_hull(mesh: trimesh.Trimesh | np.ndarray, *, name: str = "the mesh") -> Hull:
+    """Convex hull of ``mesh`` (or of ``(n, 3)`` points); :class:`UserError` when flat or degenerate.
+
+    The hull of a flat mesh (a plane, a sheet) has no volume and no facet a
+    part could rest on, so it is refused with the thickness measured.
+    """
+    points = np.asarray(getattr(mesh, "vertices", mesh), dtype=float).view(np.ndarray)
+    if points.ndim != 2 or points.shape[1] != 3 or len(points) < 4:
+        raise UserError(f"{name} has {len(points)} vertices; a solid needs at least 4")
+    extent = float(np.ptp(points, axis=0).max())
+
+    def flat(pts: np.ndarray) -> UserError:
+        centred = pts - pts.mean(axis=0)
+        thickness = float(np.ptp(centred @ np.linalg.svd(centred, full_matrices=False)[2][-1]))
+        return UserError(
+            f"{name} is flat or degenerate (thickness {thickness * 1000:.4f} mm over {extent * 1000:.3f} mm); "
+            "a part resting on a table needs a closed solid"
+        )
+
+    if not np.isfinite(extent) or extent <= 0.0:
+        raise flat(points)
+    try:
+        ch = ConvexHull(points)
+    except QhullError:  # qhull refuses flat input ("initial simplex is flat")
+        raise flat(points) from None
+    verts = points[ch.vertices]
+    # A convex body's width is at least 3 V / S (V = integral of the support distance over S / 3),
+    # so only thin hulls need the exact thickness check.
+    if ch.volume <= 0.0 or 3.0 * ch.volume / ch.area < 1e-6 * extent:
+        centred = verts - verts.mean(axis=0)
+        thickness = float(np.ptp(centred @ np.linalg.svd(centred, full_matrices=False)[2][-1]))
+        if thickness < 1e-6 * extent or ch.volume <= 0.0:
+            raise flat(points)
+    remap = np.full(len(points), -1, dtype=np.int64)
+    remap[ch.vertices] = np.arange(len(ch.vertices))
+    normals = np.ascontiguousarray(ch.equations[:, :3])
+    faces, areas, edge_nb = _orient(remap[ch.simplices], ch.neighbors, normals, verts, extent)
+    return Hull(vertices=verts, faces=faces, normals=normals, areas=areas, neighbors=edge_nb, volume=float(ch.volume))
 
 
 @dataclass
@@ -31,23 +174,25 @@ class SupportFacets:
 
     Attributes
     ----------
-    hull : the convex hull (watertight, outward normals), part frame, metres.
+    hull : the convex hull (part frame, metres).
     face_cluster : ``(F,) int`` facet index of each hull face.
     normals : ``(C, 3) float`` outward unit normal of each facet (area-weighted mean).
     offsets : ``(C,) float`` support-plane offset ``max(v . n)`` over the facet's vertices, metres.
+    depth : ``(C,) float`` how far the facet's lowest vertex lies below that plane, metres (0 when the
+        facet is exactly planar; a scan's nearly coplanar faces give a positive depth).
     areas : ``(C,) float`` facet area, m^2.
     edges : ``(E, 2) int`` hull vertex ids of the facets' boundary edges, oriented counter-clockwise
         seen from outside (the facet interior is on the left of ``a -> b`` about ``n``).
     edge_cluster : ``(E,) int`` facet owning each boundary edge.
     edge_neighbor : ``(E,) int`` facet on the other side of the edge (where the part topples to).
-    vertices, faces, face_normals, face_areas, face_centers : plain-array copies of the hull's
-        (trimesh's tracked arrays re-hash on every operation, which dominates small meshes).
+    vertices, faces, face_normals, face_areas, face_centers : the hull's, per face.
     """
 
-    hull: trimesh.Trimesh
+    hull: Hull
     face_cluster: np.ndarray
     normals: np.ndarray
     offsets: np.ndarray
+    depth: np.ndarray
     areas: np.ndarray
     edges: np.ndarray
     edge_cluster: np.ndarray
@@ -68,70 +213,61 @@ class SupportFacets:
         return np.unique(self.faces[self.face_cluster == c])
 
 
-def convex_hull(mesh: trimesh.Trimesh, *, name: str = "the mesh") -> trimesh.Trimesh:
-    """Convex hull of ``mesh``; :class:`UserError` when the mesh is flat or degenerate.
+def _components(n: int, a: np.ndarray, b: np.ndarray) -> tuple[int, np.ndarray]:
+    """Connected components of the graph on ``n`` nodes with edges ``a[i] - b[i]``: count and labels.
 
-    The hull of a flat mesh (a plane, a sheet) has no volume and no facet a
-    part could rest on, so it is refused with the thickness measured.
+    Union by hooking each edge's larger root onto its smaller one, then path
+    compression by pointer jumping, until no edge joins two components; a few
+    vectorised rounds, where a sparse-matrix graph search costs more to set up
+    than a small hull takes to cluster.
     """
-    vertices = np.asarray(mesh.vertices, dtype=float).view(np.ndarray)
-    if len(vertices) < 4:
-        raise UserError(f"{name} has {len(vertices)} vertices; a solid needs at least 4")
-    extent = float(np.ptp(vertices, axis=0).max())
-    # The thinnest extent over principal directions: SVD of centred vertices.
-    centred = vertices - vertices.mean(axis=0)
-    vt = np.linalg.svd(centred, full_matrices=False)[2]
-    thickness = float(np.ptp(centred @ vt[-1]))
-    if extent <= 0.0 or thickness < 1e-6 * max(extent, 1e-12):
-        raise UserError(
-            f"{name} is flat or degenerate (thickness {thickness * 1000:.4f} mm over {extent * 1000:.3f} mm); "
-            "a part resting on a table needs a closed solid"
-        )
-    try:
-        hull = mesh.convex_hull
-    except Exception as exc:  # noqa: BLE001 - qhull raises its own error types
-        raise UserError(
-            f"{name}: its convex hull cannot be computed ({type(exc).__name__}); is it degenerate?"
-        ) from None
-    if len(hull.faces) < 4 or not hull.is_watertight or hull.volume <= 0.0:
-        raise UserError(f"{name}: its convex hull is degenerate (volume {hull.volume:.3g} m^3); check the mesh")
-    return hull
+    root = np.arange(n)
+    while len(a):
+        ra, rb = root[a], root[b]
+        cut = ra != rb
+        if not cut.any():
+            break
+        a, b = a[cut], b[cut]
+        # Pointers only go to smaller ids, so no cycle can form.
+        np.minimum.at(root, np.maximum(ra[cut], rb[cut]), np.minimum(ra[cut], rb[cut]))
+        while True:
+            jumped = root[root]
+            if np.array_equal(jumped, root):
+                break
+            root = jumped
+    uniq, labels = np.unique(root, return_inverse=True)
+    return len(uniq), labels
 
 
-def _directed_edge_neighbors(hull: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Directed edges (face winding), their face and the face across each edge."""
-    edges = hull.edges.view(np.ndarray)  # (3F, 2), edge k belongs to face k // 3, in winding order
-    edge_face = hull.edges_face.view(np.ndarray)
-    pairs = trimesh.grouping.group_rows(hull.edges_sorted.view(np.ndarray), require_count=2)
-    if len(pairs) * 2 != len(edges):
-        raise UserError("the convex hull is not a closed 2-manifold; the mesh is degenerate")
-    pairs = np.asarray(pairs)
-    neighbor = np.empty(len(edges), dtype=np.int64)
-    neighbor[pairs[:, 0]] = edge_face[pairs[:, 1]]
-    neighbor[pairs[:, 1]] = edge_face[pairs[:, 0]]
-    return edges, edge_face, neighbor
-
-
-def _cluster_faces(hull: trimesh.Trimesh, normals: np.ndarray, areas: np.ndarray, angle_tol: float) -> np.ndarray:
+def _cluster_faces(hull: Hull, angle_tol: float) -> np.ndarray:
     """Facet label of each hull face (see the module docstring)."""
+    normals, areas = hull.normals, hull.areas
     n_faces = len(normals)
-    adj = hull.face_adjacency.view(np.ndarray)
-    close = hull.face_adjacency_angles.view(np.ndarray) < angle_tol
-    graph = coo_matrix((np.ones(int(close.sum())), (adj[close, 0], adj[close, 1])), shape=(n_faces, n_faces))
-    n_comp, labels = connected_components(graph, directed=False)
+    # Each undirected edge once: from the face with the smaller index.
+    f = np.repeat(np.arange(n_faces), 3)
+    g = hull.neighbors.reshape(-1)
+    once = f < g
+    f, g = f[once], g[once]
+    cos_tol = np.cos(angle_tol)
+    close = np.einsum("ij,ij->i", normals[f], normals[g]) > cos_tol
+    n_comp, labels = _components(n_faces, f[close], g[close])
+    if n_comp == n_faces:
+        return labels
     # A component must stay within angle_tol of its mean normal; else split it by region growing.
     mean = np.zeros((n_comp, 3))
     np.add.at(mean, labels, normals * areas[:, None])
+    # A component of zero-area slivers only has no area-weighted mean: use its plain mean.
+    empty = np.linalg.norm(mean, axis=1) <= 0.0
+    if empty.any():
+        np.add.at(mean, labels, np.where(empty[labels][:, None], normals, 0.0))
     mean /= np.linalg.norm(mean, axis=1, keepdims=True)
-    spread = np.arccos(np.clip(np.einsum("ij,ij->i", normals, mean[labels]), -1.0, 1.0))
-    bad = np.unique(labels[spread > angle_tol])
+    bad = np.unique(labels[np.einsum("ij,ij->i", normals, mean[labels]) < cos_tol])
     if len(bad) == 0:
         return labels
     neighbors: list[list[int]] = [[] for _ in range(n_faces)]
-    for a, b in adj[close]:
-        neighbors[a].append(int(b))
-        neighbors[b].append(int(a))
-    cos_tol = np.cos(angle_tol)
+    for a, b in zip(f[close].tolist(), g[close].tolist(), strict=True):
+        neighbors[a].append(b)
+        neighbors[b].append(a)
     next_label = n_comp
     for comp in bad:
         members = np.flatnonzero(labels == comp)
@@ -143,36 +279,36 @@ def _cluster_faces(hull: trimesh.Trimesh, normals: np.ndarray, areas: np.ndarray
             stack = [int(seed)]
             unassigned.discard(int(seed))
             while stack:
-                f = stack.pop()
-                labels[f] = next_label
-                for g in neighbors[f]:
-                    if g in unassigned and normals[g] @ seed_n >= cos_tol:
-                        unassigned.discard(g)
-                        stack.append(g)
+                face = stack.pop()
+                labels[face] = next_label
+                for other in neighbors[face]:
+                    if other in unassigned and normals[other] @ seed_n >= cos_tol:
+                        unassigned.discard(other)
+                        stack.append(other)
             next_label += 1
     _, labels = np.unique(labels, return_inverse=True)
     return labels
 
 
-def support_facets(hull: trimesh.Trimesh, *, angle_tol: float = np.radians(1.0)) -> SupportFacets:
+def support_facets(hull: Hull, *, angle_tol: float = np.radians(1.0)) -> SupportFacets:
     """Cluster the faces of a convex ``hull`` into support facets.
 
     Parameters
     ----------
-    hull : convex hull in the part frame (metres), e.g. from :func:`convex_hull`.
+    hull : convex hull in the part frame (metres), from :func:`convex_hull`.
     angle_tol : radians; faces within this angle of each other (and of the
         facet's mean normal) are one facet.
     """
-    vertices = np.array(hull.vertices, dtype=float)
-    faces = np.array(hull.faces, dtype=np.int64)
-    face_normals = np.array(hull.face_normals, dtype=float)
+    vertices, faces, face_normals, areas_f = hull.vertices, hull.faces, hull.normals, hull.areas
     triangles = vertices[faces]
-    cross = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-    areas_f = 0.5 * np.linalg.norm(cross, axis=1)
-    labels = _cluster_faces(hull, face_normals, areas_f, angle_tol)
+    labels = _cluster_faces(hull, angle_tol)
     n_clusters = int(labels.max()) + 1
     normals = np.zeros((n_clusters, 3))
     np.add.at(normals, labels, face_normals * areas_f[:, None])
+    # A facet of slivers only (no area) keeps its faces' plain mean normal.
+    empty = np.linalg.norm(normals, axis=1) <= 0.0
+    if empty.any():
+        np.add.at(normals, labels, np.where(empty[labels][:, None], face_normals, 0.0))
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     areas = np.bincount(labels, weights=areas_f, minlength=n_clusters)
 
@@ -180,16 +316,20 @@ def support_facets(hull: trimesh.Trimesh, *, angle_tol: float = np.radians(1.0))
     proj = np.einsum("fkj,fj->fk", triangles, normals[labels])
     offsets = np.full(n_clusters, -np.inf)
     np.maximum.at(offsets, labels, proj.max(axis=1))
+    lowest = np.full(n_clusters, np.inf)
+    np.minimum.at(lowest, labels, proj.min(axis=1))
 
-    edges, edge_face, neighbor_face = _directed_edge_neighbors(hull)
-    owner = labels[edge_face]
-    across = labels[neighbor_face]
+    # Directed edges in winding order; an edge between two facets bounds both.
+    edges = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
+    owner = np.repeat(labels, 3)
+    across = labels[hull.neighbors.reshape(-1)]
     boundary = owner != across
     return SupportFacets(
         hull=hull,
         face_cluster=labels,
         normals=normals,
         offsets=offsets,
+        depth=offsets - lowest,
         areas=areas,
         edges=edges[boundary],
         edge_cluster=owner[boundary],

@@ -15,6 +15,7 @@ Results are cached in memory per (mesh hash, COM, settings).
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
@@ -28,7 +29,7 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Placement
 from asmteach.core.parts import mesh_hash
-from asmteach.plugins.planners.placements.facets import SupportFacets, convex_hull, support_facets
+from asmteach.plugins.planners.placements.facets import Hull, SupportFacets, convex_hull, is_closed, support_facets
 from asmteach.plugins.planners.placements.stability import (
     DirectionStability,
     FacetStability,
@@ -68,20 +69,26 @@ class RejectedFacet:
 class PlacementResult:
     """Placements of one part plus what was rejected and how long it took.
 
-    ``hull`` is the convex hull (part frame, metres); ``facets`` and
-    ``stability`` are the per-facet figures; ``seconds`` the planning time
-    (symmetry included) of the computation that filled the cache.
+    ``convex`` is the convex hull (part frame, metres; :attr:`hull` views it
+    as a mesh); ``facets`` and ``stability`` are the per-facet figures;
+    ``seconds`` the planning time (symmetry included) of the computation that
+    filled the cache.
     """
 
     placements: list[Placement]
     rejected: list[RejectedFacet]
-    hull: trimesh.Trimesh
+    convex: Hull
     center_of_mass: np.ndarray
     facets: SupportFacets
     stability: FacetStability
     facet_of_placement: list[int]
     seconds: float
     notes: list[str] = field(default_factory=list)
+
+    @property
+    def hull(self) -> trimesh.Trimesh:
+        """The convex hull as a watertight mesh (part frame, metres)."""
+        return self.convex.mesh
 
 
 def canonical_rotation(normal: np.ndarray) -> np.ndarray:
@@ -92,12 +99,12 @@ def canonical_rotation(normal: np.ndarray) -> np.ndarray:
     pitch in closed form (roll 0 when ``u`` is along x, where it is free).
     """
     u = -np.asarray(normal, dtype=float) / np.linalg.norm(normal)
-    pitch = -np.arcsin(np.clip(u[0], -1.0, 1.0))
-    roll = np.arctan2(u[1], u[2]) if np.hypot(u[1], u[2]) > 1e-12 else 0.0
-    cr, sr, cp, sp = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch)
-    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
-    Ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
-    return Ry @ Rx
+    # Scalar math: this runs once per placement and numpy's per-call cost dominates 3-vectors.
+    pitch = -math.asin(min(1.0, max(-1.0, float(u[0]))))
+    roll = math.atan2(float(u[1]), float(u[2])) if math.hypot(float(u[1]), float(u[2])) > 1e-12 else 0.0
+    cr, sr, cp, sp = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch)
+    # Ry(pitch) @ Rx(roll), multiplied out.
+    return np.array([[cp, sp * sr, sp * cr], [0.0, cr, -sr], [-sp, cp * sr, cp * cr]])
 
 
 def _support_polygon(points_table: np.ndarray) -> np.ndarray:
@@ -125,27 +132,31 @@ def _axis_order(finder: SymmetryFinder | None, normal: np.ndarray, memo: dict[tu
 
 
 def _exact_support(
-    facets: SupportFacets, c: int, hv: np.ndarray, com: np.ndarray, min_margin: float
-) -> tuple[np.ndarray, DirectionStability] | None:
-    """The exact resting plane of facet ``c`` and its stability, or None when none holds the part.
+    facets: SupportFacets, stab: FacetStability, c: int, com: np.ndarray, min_margin: float, tol: float
+) -> tuple[np.ndarray, float, np.ndarray] | None:
+    """Resting normal, margin and contact points (part frame) of facet ``c``; None when none holds the part.
 
-    A facet of exactly coplanar faces rests on its mean plane. A facet of
-    nearly coplanar faces (a scan) touches its mean plane at fewer than three
-    vertices; the part then rocks onto one of its hull faces, so the face
-    planes are tried (largest first) and the one with the best margin is kept.
+    A facet of exactly coplanar faces (depth within ``tol`` metres) rests on
+    its own plane: its margin is the one :func:`facet_stability` measured and
+    its contacts are its boundary vertices. A facet of nearly coplanar faces
+    (a scan) touches its mean plane at fewer than three vertices; the part then
+    rocks onto one of its hull faces, so the face planes are tried (largest
+    first) with the independent test and the one with the best margin is kept.
     """
-    ev = evaluate_direction(hv, com, facets.normals[c])
-    if ev.margin >= min_margin:
-        return facets.normals[c], ev
+    if facets.depth[c] <= tol:
+        return facets.normals[c], float(stab.margin[c]), facets.vertices[facets.edges[facets.edge_cluster == c, 0]]
+    hv = facets.vertices
+    candidates = [facets.normals[c]]
     faces = np.flatnonzero(facets.face_cluster == c)
     faces = faces[np.argsort(-facets.face_areas[faces], kind="stable")][:_MAX_FACE_TRIALS]
-    best: tuple[np.ndarray, DirectionStability] | None = None
-    for f in faces:
-        n = facets.face_normals[f]
-        ev_f = evaluate_direction(hv, com, n)
-        if ev_f.margin >= min_margin and (best is None or ev_f.margin > best[1].margin):
-            best = (n, ev_f)
-    return best
+    best: DirectionStability | None = None
+    for k, n in enumerate([*candidates, *facets.face_normals[faces]]):
+        ev = evaluate_direction(hv, com, n, tol=tol)
+        if k == 0 and ev.margin >= min_margin:
+            return ev.normal, ev.margin, ev.contacts
+        if ev.margin >= min_margin and (best is None or ev.margin > best.margin):
+            best = ev
+    return None if best is None else (best.normal, best.margin, best.contacts)
 
 
 def plan_placements(
@@ -175,7 +186,8 @@ def plan_placements(
     """
     t0 = time.perf_counter()
     notes: list[str] = []
-    if not mesh.is_watertight:
+    closed = is_closed(mesh.faces)
+    if not closed:
         key = mesh_hash(mesh)
         if key not in _warned:
             _warned.add(key)
@@ -183,18 +195,19 @@ def plan_placements(
         notes.append("mesh not watertight: convex hull used")
     hull = convex_hull(mesh, name=name)
     if center_of_mass is None:
-        center_of_mass = mesh.center_mass if mesh.is_watertight else hull.center_mass
+        center_of_mass = mesh.center_mass if closed else hull.center_mass
     com = np.asarray(center_of_mass, dtype=float)
     if com.shape != (3,) or not np.all(np.isfinite(com)):
         raise UserError(f"{name}: the centre of mass must be three finite numbers (metres), got {com.tolist()}")
-    hv = np.array(hull.vertices, dtype=float)
-    hn = np.array(hull.face_normals, dtype=float)
-    outside = float(np.max(hn @ com - np.einsum("ij,ij->i", hn, hv[np.asarray(hull.faces)[:, 0]])))
+    hv = hull.vertices
+    outside = float(np.max(hull.normals @ com - np.einsum("ij,ij->i", hull.normals, hv[hull.faces[:, 0]])))
     if outside >= 0.0:
         raise UserError(
             f"{name}: the centre of mass {np.round(com, 6).tolist()} m lies outside the convex hull "
             f"(by {outside * 1000:.3f} mm); give it in the part frame, in metres"
         )
+    # Contact tolerance of the independent test (evaluate_direction's default).
+    tol = 1e-6 * float(np.ptp(hv, axis=0).max())
     facets = support_facets(hull, angle_tol=np.radians(angle_tol_deg))
     stab = facet_stability(facets, com, min_margin=min_margin)
 
@@ -206,7 +219,7 @@ def plan_placements(
     orders: dict[tuple[float, ...], int] = {}
     refused: list[RejectedFacet] = []
     for c in keep:
-        exact = _exact_support(facets, int(c), hv, com, min_margin)
+        exact = _exact_support(facets, stab, int(c), com, min_margin, tol)
         if exact is None:
             refused.append(
                 RejectedFacet(
@@ -217,19 +230,21 @@ def plan_placements(
                 )
             )
             continue
-        normal, ev = exact
+        normal, margin, contacts = exact
         R = canonical_rotation(normal)
         pts = hv @ R.T
         t = np.array([-(R @ com)[0], -(R @ com)[1], -pts[:, 2].min()])
         T = geometry.from_rotation(R, t)
-        contact = geometry.transform_points(T, ev.contacts)
+        contact = geometry.transform_points(T, contacts)
         order = _axis_order(finder, normal, orders)
+        # Built from validated parts (T is a proper rotation by construction), so pydantic's
+        # per-field validation, which costs as much as the rest of the loop, is skipped.
         placements.append(
-            Placement(
+            Placement.model_construct(
                 id=len(placements),
                 T_table_part=T,
                 probability=float(np.clip(stab.probability[c], 0.0, 1.0)),
-                margin=float(ev.margin),
+                margin=margin,
                 support_polygon=_support_polygon(contact),
                 symmetry_yaws=symmetry_yaws(order),
             )
@@ -253,7 +268,7 @@ def plan_placements(
     return PlacementResult(
         placements=placements,
         rejected=rejected,
-        hull=hull,
+        convex=hull,
         center_of_mass=com,
         facets=facets,
         stability=stab,

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from asmteach.plugins.planners.placements.facets import SupportFacets
+from asmteach.plugins.planners.placements.facets import SupportFacets, cross
 
 __all__ = ["DirectionStability", "FacetStability", "evaluate_direction", "facet_stability", "plane_basis"]
 
@@ -56,7 +56,7 @@ def _solid_angles(triangles: np.ndarray, apex: np.ndarray) -> np.ndarray:
     length = np.linalg.norm(r, axis=2)
     a, b, c = r[:, 0], r[:, 1], r[:, 2]
     la, lb, lc = length[:, 0], length[:, 1], length[:, 2]
-    num = np.einsum("ij,ij->i", a, np.cross(b, c))
+    num = np.einsum("ij,ij->i", a, cross(b, c))
     den = (
         la * lb * lc
         + np.einsum("ij,ij->i", a, b) * lc
@@ -89,7 +89,7 @@ def facet_stability(facets: SupportFacets, com: np.ndarray, *, min_margin: float
     a = v[facets.edges[:, 0]]
     b = v[facets.edges[:, 1]]
     n_e = facets.normals[facets.edge_cluster]
-    inward = np.cross(n_e, b - a)
+    inward = cross(n_e, b - a)
     inward /= np.linalg.norm(inward, axis=1, keepdims=True)
     p_e = proj[facets.edge_cluster]
     s = np.einsum("ij,ij->i", p_e - a, inward)
@@ -106,8 +106,8 @@ def facet_stability(facets: SupportFacets, com: np.ndarray, *, min_margin: float
     np.add.at(centroid, facets.face_cluster, facets.face_centers * face_area[:, None])
     centroid /= np.maximum(facets.areas, 1e-300)[:, None]
     g = centroid[facets.edge_cluster]
-    w1 = np.einsum("ij,ij->i", np.cross(a - g, p_e - g), n_e)
-    w2 = np.einsum("ij,ij->i", np.cross(p_e - g, b - g), n_e)
+    w1 = np.einsum("ij,ij->i", cross(a - g, p_e - g), n_e)
+    w2 = np.einsum("ij,ij->i", cross(p_e - g, b - g), n_e)
     in_wedge = (w1 >= 0.0) & (w2 >= 0.0) & (s < 0.0)
     # Prefer wedge edges, then the most violated edge (a numerical fallback).
     key = np.where(in_wedge, -1e9, 0.0) + s
@@ -142,9 +142,9 @@ def plane_basis(normal: np.ndarray) -> np.ndarray:
     """``(2, 3)`` orthonormal in-plane axes ``(u, v)`` with ``u x v = normal``."""
     n = np.asarray(normal, dtype=float) / np.linalg.norm(normal)
     helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(helper, n)
+    u = cross(helper, n)
     u /= np.linalg.norm(u)
-    return np.stack([u, np.cross(n, u)])
+    return np.stack([u, cross(n, u)])
 
 
 @dataclass

@@ -25,4 +25,7 @@ def test_subset_meets_targets(tmp_path: Path) -> None:
     assert lego["trimesh_below_margin"] > 0 and "margin" in lego["why"]
     paths = exp.summarize([{"ok": True, "metrics": metrics}], tmp_path)
     assert {p.name for p in paths} == {"placements_vs_trimesh.md", "placements_vs_trimesh.csv"}
-    assert "trimesh / ours" in (tmp_path / "placements_vs_trimesh.md").read_text()
+    assert metrics["speedup_min"] > 0.0 and metrics["cpu_speedup_min"] > 0.0
+    assert all(m["ms_ours"] > 0.0 and m["cpu_ms_trimesh"] >= 0.0 for m in metrics["meshes"])
+    text = (tmp_path / "placements_vs_trimesh.md").read_text()
+    assert "trimesh / ours" in text and "per mesh at least" in text
