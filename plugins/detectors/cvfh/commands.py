@@ -7,7 +7,9 @@ z up, the table below the part. ``detection.json`` holds ``found``,
 ``reason``, ``rough`` and ``corrected`` (``T_world_part`` 4x4 metres,
 ``xyz_mm``, ``rpy_deg``), ``fitness``, ``inlier_rmse`` and ``timing_ms`` per
 stage; ``timing_ms.total`` is the detection proper (detector + corrector),
-without start-up, file loading or the view-database build.
+without start-up, file loading or the view-database build. ``--viewpoint X Y Z``
+gives the camera centre (world frame, metres) to the detector and the
+corrector; without it the detector's ``viewpoint`` setting is used.
 
 Exit codes: 0 found, 1 not found (the JSON says why), 2 bad input (one line).
 """
@@ -15,6 +17,7 @@ Exit codes: 0 found, 1 not found (the JSON says why), 2 bad input (one line).
 from __future__ import annotations
 
 import argparse
+import inspect
 import logging
 import time
 from pathlib import Path
@@ -56,7 +59,11 @@ def asmteach_add_commands(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--corrector", default=None, help="corrector plugin (default: the config's, else stable_placements)")
     p.add_argument("--no-correct", action="store_true", help="skip the placement correction")
     p.add_argument(
-        "--viewpoint", type=float, nargs=3, metavar=("X", "Y", "Z"), help="camera centre, world frame, metres"
+        "--viewpoint",
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        help="camera centre, world frame, metres (default: the detector's viewpoint setting)",
     )
     p.add_argument("--table-height", type=float, default=None, help="known table top z (metres); else fitted")
     p.add_argument("--units", choices=["m", "mm"], default="m", help="units of a mesh file given directly")
@@ -72,10 +79,7 @@ def _cmd_detect(args: argparse.Namespace) -> int:
         cor_choice = (args.corrector, {})
     if args.no_correct:
         cor_choice = None
-    det_settings = dict(det_choice[1])
-    if args.viewpoint is not None:
-        det_settings["viewpoint"] = list(args.viewpoint)
-    detector = registry.create("detectors", det_choice[0], det_settings, seed=seed)
+    detector = registry.create("detectors", det_choice[0], dict(det_choice[1]), seed=seed)
     assert isinstance(detector, Detector)
     corrector = None
     if cor_choice is not None:
@@ -88,7 +92,8 @@ def _cmd_detect(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     detector.prepare(part)  # the view-database build is not detection time
     prep_ms = 1000.0 * (time.perf_counter() - t0)
-    detection = run_detection(detector, corrector, cloud, part, table)
+    viewpoint = None if args.viewpoint is None else np.asarray(args.viewpoint, dtype=float)
+    detection = run_detection(detector, corrector, cloud, part, table, viewpoint=viewpoint)
     report = detection_report(detection)
     report["timing_ms_excluded"] = {"prepare": round(prep_ms, 1)}
     report["detector"] = det_choice[0]
@@ -111,16 +116,27 @@ def run_detection(
     cloud: np.ndarray,
     part: PartModel,
     table: TablePlane | None = None,
+    *,
+    viewpoint: np.ndarray | None = None,
 ) -> Detection:
-    """Detect, then correct the rough pose (when a corrector is given); timings include the correction."""
-    det = detector.detect(cloud, part, table)
+    """Detect, then correct the rough pose (when a corrector is given); timings include the correction.
+
+    ``viewpoint`` ((3,), world frame, metres) is the camera centre, or ``None``
+    for the detector's own setting. The corrector gets the viewpoint the
+    detector used (``details["viewpoint"]``) when its ``correct`` takes one.
+    """
+    det = detector.detect(cloud, part, table, viewpoint=viewpoint)
     if not det.found or corrector is None or det.rough is None:
         return det
     t0, c0 = time.perf_counter(), time.process_time()
     used_table = table or _table_of(det)
     segment = part_segment(cloud, det.rough, part, used_table)
     try:
-        corr = corrector.correct(det.rough, part, used_table, segment)
+        used_eye = det.details.get("viewpoint", viewpoint)
+        if used_eye is not None and _takes_viewpoint(corrector):
+            corr = corrector.correct(det.rough, part, used_table, segment, viewpoint=np.asarray(used_eye, float))
+        else:
+            corr = corrector.correct(det.rough, part, used_table, segment)
     except UserError as exc:
         det.details["correction_error"] = str(exc)
         det.timing_ms["detect"] = det.timing_ms.get("total", 0.0)
@@ -135,6 +151,11 @@ def run_detection(
     det.timing_ms["cpu_correct"] = round(1000.0 * (time.process_time() - c0), 2)
     det.details["placement_id"] = corr.placement_id
     return det
+
+
+def _takes_viewpoint(corrector: Corrector) -> bool:
+    """Whether ``corrector.correct`` accepts a ``viewpoint`` keyword (the core interface does not require one)."""
+    return "viewpoint" in inspect.signature(corrector.correct).parameters
 
 
 def _table_of(det: Detection) -> TablePlane:

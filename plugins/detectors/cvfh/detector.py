@@ -6,7 +6,8 @@ Pipeline (paper, "Rough detection using point cloud"), all in the world frame
 1. check the cloud, fit and remove the table plane (Open3D RANSAC), cluster
    what stands on it (DBSCAN; pieces a self-occlusion split apart are merged
    while the union fits the part); clusters too big for the part are skipped;
-2. describe each cluster in a virtual camera frame at ``viewpoint`` looking
+2. describe each cluster in a virtual camera frame at the viewpoint (the
+   ``viewpoint`` argument of :meth:`detect`, else the setting) looking
    at the cluster (CVFH regions + CRH), match its regions against the 42-view
    database (k nearest views), and turn every (view, CRH roll peak) pair into
    a pose hypothesis;
@@ -30,6 +31,7 @@ import numpy as np
 from pydantic import Field
 
 from asmteach.core import geometry
+from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Detector, PartModel
 from asmteach.core.models import Detection, StrictModel, TablePlane, Vec3
 from asmteach.plugins.detectors.cvfh.refine import ModelCloud, RefineSettings, Verdict, icp_refine, model_cloud, verify
@@ -50,10 +52,26 @@ from asmteach.plugins.detectors.cvfh.views import (
 )
 from asmteach.plugins.detectors.depth_camera import KinectSettings, look_at
 
-__all__ = ["DEFAULT_VIEWPOINT", "CvfhIcpDetector", "StageClock"]
+__all__ = ["DEFAULT_VIEWPOINT", "CvfhIcpDetector", "StageClock", "resolve_viewpoint"]
 
 DEFAULT_VIEWPOINT = (-0.05, 0.0, 0.70)
 """Where the scene Kinect of asmteach's table set-up sits (world, metres)."""
+
+
+def resolve_viewpoint(viewpoint: np.ndarray | None, default: np.ndarray) -> np.ndarray:
+    """The camera centre to use (world frame, metres): ``viewpoint`` when given, else ``default``.
+
+    Raises :class:`UserError` for anything but three finite numbers, or for a
+    camera farther than 20 m from the world origin (a viewpoint in millimetres).
+    """
+    eye = np.asarray(default if viewpoint is None else viewpoint, dtype=float)
+    if eye.shape != (3,) or not np.all(np.isfinite(eye)):
+        raise UserError(f"viewpoint must be 3 finite numbers (camera centre, world frame, metres), got {eye.tolist()}")
+    if float(np.linalg.norm(eye)) > 20.0:
+        raise UserError(
+            f"viewpoint {eye.tolist()} is {np.linalg.norm(eye):.0f} m from the origin: give it in metres, not mm"
+        )
+    return eye
 
 
 class CvfhSettings(StrictModel):
@@ -154,8 +172,22 @@ class CvfhIcpDetector(Detector):
         return prep
 
     # ------------------------------------------------------------ detection
-    def detect(self, cloud: np.ndarray, part: PartModel, table: TablePlane | None = None) -> Detection:
-        """Find ``part`` in ``cloud`` ((n, 3) world frame, metres); see the module docstring."""
+    def detect(
+        self,
+        cloud: np.ndarray,
+        part: PartModel,
+        table: TablePlane | None = None,
+        viewpoint: np.ndarray | None = None,
+    ) -> Detection:
+        """Find ``part`` in ``cloud`` ((n, 3) world frame, metres); see the module docstring.
+
+        ``viewpoint`` is the camera centre ((3,), world frame, metres); ``None``
+        uses the ``viewpoint`` setting. It orients the virtual camera the
+        descriptors are computed in (CVFH's viewpoint component, CRH's roll)
+        and casts the rays of the free-space check; ``details["viewpoint"]``
+        reports the one used.
+        """
+        eye = resolve_viewpoint(viewpoint, self.settings.viewpoint)
         prep = self._prep(part)
         s = self.settings
         clock = StageClock()
@@ -186,7 +218,7 @@ class CvfhIcpDetector(Detector):
         tried = 0
         for cluster in plausible[: s.max_clusters]:
             tried += 1
-            got = self._detect_cluster(cluster, pts, prep, clock, table)
+            got = self._detect_cluster(cluster, pts, prep, clock, table, eye)
             if got.best is not None and (outcome.best is None or got.best.score > outcome.best.score):
                 outcome.best, outcome.details = got.best, got.details
             if got.closest is not None and (outcome.closest is None or got.closest.score > outcome.closest.score):
@@ -201,7 +233,12 @@ class CvfhIcpDetector(Detector):
                 found=False,
                 reason=f"{part.name!r} not found: best hypothesis rejected ({why})",
                 timing_ms=timing,
-                details={"clusters": len(clusters), "clusters_tried": tried, "table": table.model_dump(mode="json")},
+                details={
+                    "clusters": len(clusters),
+                    "clusters_tried": tried,
+                    "table": table.model_dump(mode="json"),
+                    "viewpoint": eye.tolist(),
+                },
             )
         v = outcome.best
         return Detection(
@@ -218,15 +255,21 @@ class CvfhIcpDetector(Detector):
                 "clusters": len(clusters),
                 "clusters_tried": tried,
                 "table": table.model_dump(mode="json"),
+                "viewpoint": eye.tolist(),
                 "view_db_built_ms": round(prep.build_ms, 1) if prep.built_now else 0.0,
             },
         )
 
     def _detect_cluster(
-        self, cluster: np.ndarray, pts: np.ndarray, prep: _Prepared, clock: StageClock, table: TablePlane
+        self,
+        cluster: np.ndarray,
+        pts: np.ndarray,
+        prep: _Prepared,
+        clock: StageClock,
+        table: TablePlane,
+        eye: np.ndarray,
     ) -> _Outcome:
         s = self.settings
-        eye = np.asarray(s.viewpoint, dtype=float)
         centroid = cluster.mean(axis=0)
         T_world_vcam = look_at(eye, centroid, _up_for(centroid - eye))
         local = geometry.transform_points(geometry.invert(T_world_vcam), cluster)
@@ -314,8 +357,16 @@ class CvfhIcpDetector(Detector):
 
 
 def _width(points: np.ndarray) -> float:
-    """Bounding-box diagonal of a cluster, metres."""
-    return float(np.linalg.norm(np.ptp(points, axis=0)))
+    """Diagonal of a cluster's bounding box aligned with its principal axes in the table plane, metres.
+
+    A world-axis-aligned box would grow by up to sqrt(2) for a part turned 45 deg
+    about the table normal and reject it as too wide.
+    """
+    xy = points[:, :2] - points[:, :2].mean(axis=0)
+    if len(xy) >= 3:
+        _, vecs = np.linalg.eigh(xy.T @ xy)
+        xy = xy @ vecs
+    return float(np.linalg.norm([*np.ptp(xy, axis=0), np.ptp(points[:, 2])]))
 
 
 def _up_for(direction: np.ndarray) -> np.ndarray:

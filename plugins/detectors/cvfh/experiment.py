@@ -204,8 +204,7 @@ class DetectionPrecision(Experiment):
         scene = render_table_scene(
             DepthCamera(params.camera, seed=seed), part.mesh, T_true, table=params.table, T_world_cam=T_world_cam
         )
-        det_settings = {"viewpoint": T_world_cam[:3, 3].tolist(), **params.detector_settings}
-        detector = registry.create("detectors", params.detector, det_settings, seed=seed)
+        detector = registry.create("detectors", params.detector, params.detector_settings, seed=seed)
         corrector = None
         if params.corrector:
             corrector = registry.create("correctors", params.corrector, params.corrector_settings, seed=seed)
@@ -217,7 +216,8 @@ class DetectionPrecision(Experiment):
         prepare_ms = 1000.0 * (time.perf_counter() - t0)
         assert corrector is None or isinstance(corrector, Corrector)
         table = TablePlane(height=params.table.height) if params.give_table else None
-        det = run_detection(detector, corrector, scene.cloud, part, table)
+        # The experiment knows its camera: its centre is the viewpoint of the detector and the corrector.
+        det = run_detection(detector, corrector, scene.cloud, part, table, viewpoint=T_world_cam[:3, 3])
 
         row: dict[str, Any] = {
             "kind": kind,

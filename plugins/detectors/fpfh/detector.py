@@ -19,7 +19,7 @@ import asmteach.core  # noqa: F401  (loads libusb before open3d)
 from asmteach.core import geometry
 from asmteach.core.interfaces import Detector, PartModel
 from asmteach.core.models import Detection, StrictModel, TablePlane, Vec3
-from asmteach.plugins.detectors.cvfh.detector import DEFAULT_VIEWPOINT, StageClock
+from asmteach.plugins.detectors.cvfh.detector import DEFAULT_VIEWPOINT, StageClock, resolve_viewpoint
 from asmteach.plugins.detectors.cvfh.refine import ModelCloud, RefineSettings, Verdict, icp_refine, model_cloud, verify
 from asmteach.plugins.detectors.cvfh.segment import (
     SegmentSettings,
@@ -90,8 +90,20 @@ class FpfhRansacDetector(Detector):
             self._prepared[key] = _Prepared(model, down, feats, diameter)
         return self._prepared[key]
 
-    def detect(self, cloud: np.ndarray, part: PartModel, table: TablePlane | None = None) -> Detection:
-        """Find ``part`` in ``cloud`` ((n, 3) world frame, metres)."""
+    def detect(
+        self,
+        cloud: np.ndarray,
+        part: PartModel,
+        table: TablePlane | None = None,
+        viewpoint: np.ndarray | None = None,
+    ) -> Detection:
+        """Find ``part`` in ``cloud`` ((n, 3) world frame, metres).
+
+        ``viewpoint`` is the camera centre ((3,), world frame, metres) that
+        orients the cluster's normals and casts the free-space check's rays;
+        ``None`` uses the ``viewpoint`` setting.
+        """
+        eye = resolve_viewpoint(viewpoint, self.settings.viewpoint)
         prep = self._prep(part)
         s = self.settings
         clock = StageClock()
@@ -115,7 +127,6 @@ class FpfhRansacDetector(Detector):
         plausible = [c for c in clusters if _width(c) <= s.size_slack * prep.diameter + 0.01]
         if not plausible:
             return fail(f"no cluster fits {part.name!r}: every cluster is wider than the part")
-        eye = np.asarray(s.viewpoint, dtype=float)
         best: Verdict | None = None
         closest: Verdict | None = None
         for ci, cluster in enumerate(plausible[: s.max_clusters]):
@@ -169,7 +180,12 @@ class FpfhRansacDetector(Detector):
             fitness=best.fitness,
             inlier_rmse=best.inlier_rmse,
             timing_ms=timing,
-            details={"violation": best.violation, "clusters": len(clusters), "table": table.model_dump(mode="json")},
+            details={
+                "violation": best.violation,
+                "clusters": len(clusters),
+                "table": table.model_dump(mode="json"),
+                "viewpoint": eye.tolist(),
+            },
         )
 
 

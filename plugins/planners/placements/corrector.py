@@ -13,7 +13,10 @@ the paper, its origin) kept at the raw x, y.
 
 Beyond the paper: a planar ICP (x, y, yaw; :mod:`.planar_icp`) of the model
 against the observed cloud, from several yaw starts, and a choice among the
-equivalent poses of a rotationally symmetric placement. The table comes from
+equivalent poses of a rotationally symmetric placement. When the camera
+centre is known (``viewpoint`` argument or setting) the ICP also matches the
+model surface the camera can see at each pose against the cloud, so the part
+cannot slide along an axis whose ends are seen edge-on. The table comes from
 the given :class:`TablePlane`, or is fitted to the cloud (Open3D RANSAC) when
 none is given or ``table: fit``.
 
@@ -33,7 +36,7 @@ from pydantic import Field
 from asmteach.core import geometry
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Corrector, PartModel
-from asmteach.core.models import Correction, StrictModel, TablePlane
+from asmteach.core.models import Correction, StrictModel, TablePlane, Vec3
 from asmteach.plugins.planners.placements.planar_icp import ModelSurface, planar_icp, planar_transform
 from asmteach.plugins.planners.placements.planner import PlacementResult, placement_result
 from asmteach.plugins.planners.placements.table import fit_table_plane, points_above, table_frame
@@ -107,6 +110,17 @@ class StablePlacementCorrector(Corrector):
             default_factory=lambda: [0.0, -12.0, 12.0, -25.0, 25.0],
             description="yaw offsets (degrees) of the ICP starts; the best fit wins",
         )
+        viewpoint: Vec3 | None = Field(
+            None,
+            description="camera centre, world frame, metres (used when correct() is not given one); "
+            "null: the ICP matches the cloud to the model only, not the visible model to the cloud",
+        )
+        reverse_weight: float = Field(
+            1.0, ge=0.0, description="weight of the visible-model-to-cloud ICP term (0: cloud-to-model only)"
+        )
+        visible_max_incidence_deg: float = Field(
+            70.0, gt=0.0, lt=90.0, description="model surface seen more obliquely is not expected in the cloud"
+        )
         max_refine_shift: float = Field(
             0.03, gt=0.0, description="metres; an ICP result farther than this from the snapped pose is refused"
         )
@@ -128,7 +142,7 @@ class StablePlacementCorrector(Corrector):
     def _surface(self, part: PartModel) -> ModelSurface:
         key = part.source_hash or str(id(part.mesh))
         if key not in self._surfaces:
-            self._surfaces[key] = ModelSurface(part.mesh)
+            self._surfaces[key] = ModelSurface(part.mesh, seed=self.seed)
         return self._surfaces[key]
 
     def _table(self, table: TablePlane | None, cloud: np.ndarray | None) -> tuple[TablePlane, bool]:
@@ -148,12 +162,15 @@ class StablePlacementCorrector(Corrector):
         part: PartModel,
         table: TablePlane | None = None,
         cloud: np.ndarray | None = None,
+        viewpoint: np.ndarray | None = None,
     ) -> Correction:
         """Correct a rough ``(4, 4)`` ``T_world_part`` of ``part`` resting on ``table``.
 
         ``cloud`` (world frame, metres) is the observed part segment, or a scene
         that also shows the table when the table is to be fitted; points within
-        ``table_band`` of the table are ignored by the refinement.
+        ``table_band`` of the table are ignored by the refinement. ``viewpoint``
+        (``(3,)``, world frame, metres) is the camera centre; ``None`` uses the
+        ``viewpoint`` setting.
         """
         s = self.settings
         t0 = time.perf_counter()
@@ -179,7 +196,8 @@ class StablePlacementCorrector(Corrector):
         icp_info: dict[str, Any] = {"applied": False}
         T_ref = T_snap
         if cloud is not None and s.refine:
-            T_ref, icp_info = self._refine(part, T_snap, T_raw_w, table, T_wt, cloud, placement, com)
+            eye = viewpoint if viewpoint is not None else s.viewpoint
+            T_ref, icp_info = self._refine(part, T_snap, T_raw_w, table, T_wt, cloud, placement, com, eye)
         order = len(placement.symmetry_yaws)
         T_fin, k = self._choose_equivalent(T_ref, T_raw, Rp[i], order, com)
         # Recompose exactly: R = Rz(psi) R_p and the lowest point at z = 0 (no drift from the ICP steps).
@@ -233,16 +251,17 @@ class StablePlacementCorrector(Corrector):
         cloud: np.ndarray,
         placement: Any,
         com: np.ndarray,
+        viewpoint: np.ndarray | None,
     ) -> tuple[np.ndarray, dict[str, Any]]:
         s = self.settings
-        pts = points_above(cloud, table, s.table_band)
+        T_tw = geometry.invert(T_wt)
+        pts = geometry.transform_points(T_tw, points_above(cloud, table, s.table_band))
         # Keep points near the part: within its bounding radius (plus slack) of the raw COM.
         radius = float(np.linalg.norm(part.mesh.extents)) * 0.75 + s.icp_max_correspondence
-        com_w = geometry.transform_points(T_raw_w, com[None, :])[0]
-        pts = pts[np.linalg.norm(pts - com_w, axis=1) < radius]
-        if len(pts) < s.min_cloud_points:
-            return T_snap, {"applied": False, "reason": f"{len(pts)} part points < {s.min_cloud_points}"}
-        pts_t = geometry.transform_points(geometry.invert(T_wt), pts)
+        com_t = geometry.transform_points(T_tw @ T_raw_w, com[None, :])[0]
+        pts_t = pts[np.linalg.norm(pts - com_t, axis=1) < radius]
+        if len(pts_t) < s.min_cloud_points:
+            return T_snap, {"applied": False, "reason": f"{len(pts_t)} part points < {s.min_cloud_points}"}
         surface = self._surface(part)
         order = len(placement.symmetry_yaws)
         half_period = np.pi / order
@@ -251,6 +270,9 @@ class StablePlacementCorrector(Corrector):
             "max_correspondence": s.icp_max_correspondence,
             "min_correspondence": s.icp_min_correspondence,
             "max_iterations": s.icp_max_iterations,
+            "viewpoint": None if viewpoint is None else geometry.transform_points(T_tw, np.asarray(viewpoint)[None])[0],
+            "reverse_weight": s.reverse_weight,
+            "max_incidence": np.radians(s.visible_max_incidence_deg),
         }
         baseline = planar_icp(surface, T_snap, pts_t, **{**kwargs, "max_iterations": 0})
         best = None
@@ -264,7 +286,9 @@ class StablePlacementCorrector(Corrector):
         offset, res = best
         shift = float(np.linalg.norm(res.T_table_part[:2, 3] - T_snap[:2, 3]))
         info: dict[str, Any] = {
-            "points": len(pts),
+            "points": len(pts_t),
+            "viewpoint": viewpoint is not None,
+            "coverage": res.coverage,
             "start_yaw_deg": float(np.degrees(offset)),
             "fitness": res.fitness,
             "rmse_mm": res.rmse * 1000.0,
