@@ -65,6 +65,31 @@ def _cmd_library(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_run(args: argparse.Namespace) -> int:
+    from asmteach.core.config import load_run_config
+    from asmteach.core.pipeline import run_pipeline
+
+    overrides = {}
+    for item in args.set or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise UserError(f"--set {item!r}: write KEY=VALUE, e.g. --set seed=3")
+        import yaml
+
+        overrides[key.strip()] = yaml.safe_load(value)
+    cfg = load_run_config(args.config, overrides=overrides or None)
+    out = Path(args.out)
+    report = run_pipeline(cfg, out, pm=args.plugin_manager)
+    try:
+        from asmteach.core.report_html import format_summary
+
+        print(format_summary(report))
+    except ImportError:
+        print(f"{cfg.name}: {'success' if report.success else 'failed at ' + str(report.failed_stage)}")
+    print(f"report: {out / 'report.html'}")
+    return 0 if report.success else 1
+
+
 def build_parser(pm=None) -> argparse.ArgumentParser:
     """The argument parser with core commands and every plugin's commands."""
     try:
@@ -91,6 +116,12 @@ def build_parser(pm=None) -> argparse.ArgumentParser:
     p.add_argument("folder", help="folder of part YAML files (searched recursively)")
     p.add_argument("--out", required=True, help="PNG file to write")
     p.set_defaults(func=_cmd_library)
+
+    p = sub.add_parser("run", help="the whole pipeline in simulation (teach, detect, plan, execute) with a report")
+    p.add_argument("config", help="run config YAML")
+    p.add_argument("--out", required=True, help="output folder (report.json, report.html, figures, animation)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key (dotted path)")
+    p.set_defaults(func=_cmd_run, plugin_manager=pm)
 
     from asmteach.core.sweep import add_sweep_command
 

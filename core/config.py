@@ -57,6 +57,7 @@ class RunConfig(StrictModel):
     grasp_planner: PluginChoice = Field(default_factory=lambda: PluginChoice(plugin="antipodal"))
     motion_planner: PluginChoice = Field(default_factory=lambda: PluginChoice(plugin="trrt"))
     robot: PluginChoice = Field(default_factory=lambda: PluginChoice(plugin="nextage_pybullet"))
+    assembly_planner: PluginChoice = Field(default_factory=lambda: PluginChoice(plugin="regrasp"))
     demo: dict[str, Any] = Field(
         default_factory=dict, description="settings of the demonstration renderer (render-demo)"
     )
@@ -76,6 +77,7 @@ ROLE_OF_KEY = {
     "grasp_planner": "grasp_planners",
     "motion_planner": "motion_planners",
     "robot": "robots",
+    "assembly_planner": "assembly_planners",
 }
 
 

@@ -1,4 +1,4 @@
-"""The six roles of the pipeline as small abstract classes.
+"""The roles of the pipeline as small abstract classes.
 
 A plugin is a subclass of one of these, registered under the role's
 entry-point group (see :mod:`asmteach.core.registry`). Each plugin declares
@@ -15,6 +15,7 @@ from __future__ import annotations
 import abc
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -28,6 +29,7 @@ from asmteach.core.models import (
     Grasp,
     HandSpec,
     PartSpec,
+    Plan,
     StrictModel,
     TablePlane,
     Trajectory,
@@ -35,6 +37,9 @@ from asmteach.core.models import (
 
 __all__ = [
     "ROLES",
+    "AssemblyPlanner",
+    "AssemblyProblem",
+    "AssemblyResult",
     "Corrector",
     "Detector",
     "GraspPlanner",
@@ -116,6 +121,22 @@ class Teacher(Plugin):
         support an estimate (no marker of a part seen, too few frames).
         """
 
+    def demonstrate(
+        self,
+        task: AssemblyTask,
+        demo: dict[str, Any],
+        camera_file: Path | None = None,
+        out_dir: Path | None = None,
+    ) -> tuple[list[np.ndarray], CameraIntrinsics]:
+        """Synthetic demonstration frames of ``task`` (its true ``T_A_B``/``v_a``) for simulated runs.
+
+        ``demo`` holds the renderer's settings (the config's ``demo`` section);
+        ``camera_file`` optional intrinsics; when ``out_dir`` is given the
+        frames and their ground truth are written there too. Optional: a
+        teacher that cannot render raises ``NotImplementedError``.
+        """
+        raise NotImplementedError(f"{type(self).__name__} cannot render demonstrations")
+
 
 # ---------------------------------------------------------------- detection
 class Detector(Plugin):
@@ -125,7 +146,13 @@ class Detector(Plugin):
         """Build or load per-part data (view databases); called once per part."""
 
     @abc.abstractmethod
-    def detect(self, cloud: np.ndarray, part: PartModel, table: TablePlane | None = None) -> Detection:
+    def detect(
+        self,
+        cloud: np.ndarray,
+        part: PartModel,
+        table: TablePlane | None = None,
+        viewpoint: np.ndarray | None = None,
+    ) -> Detection:
         """Detect ``part`` in ``cloud``.
 
         Parameters
@@ -134,6 +161,9 @@ class Detector(Plugin):
             the table below the part. NaN rows are ignored.
         part : the part to find.
         table : the table plane when known; otherwise the detector fits it.
+        viewpoint : ``(3,)`` camera centre in the world frame (metres) when
+            known (view-dependent descriptors need it); otherwise the
+            detector's own setting.
 
         Returns a :class:`Detection` with ``rough`` set, or ``found=False`` and
         a ``reason``; never a wrong pose reported as found when verification fails.
@@ -150,11 +180,13 @@ class Corrector(Plugin):
         part: PartModel,
         table: TablePlane,
         cloud: np.ndarray | None = None,
+        viewpoint: np.ndarray | None = None,
     ) -> Correction:
         """Correct a rough ``(4, 4)`` pose of ``part`` resting on ``table``.
 
         ``cloud`` (world frame) is the observed segment of the part, if the
-        corrector refines against it.
+        corrector refines against it; ``viewpoint`` the ``(3,)`` camera centre
+        in the world frame (metres) when known.
         """
 
 
@@ -200,6 +232,9 @@ class MotionPlanner(Plugin):
         """Find a path from ``start`` to ``goal`` (``(dof,)`` radians) within joint bounds.
 
         ``is_valid(q)`` says whether a configuration is collision-free;
+        ``is_valid`` and ``cost`` may also carry a vectorised ``.batch(qs)``
+        for ``(n, dof)`` configurations, which planners may use to check
+        whole edges at once (see ``asmteach.plugins.planners.motion.batch``);
         ``cost(q)`` is the state cost a cost-aware planner minimises (higher is
         worse, e.g. inverse clearance). Returns a typed result carrying the
         reason of a failure (``"timeout after 5.0 s"``, ``"start in collision"``).
@@ -314,8 +349,16 @@ class Robot(Plugin):
         """Simulated ground-truth ``T_world_part`` of a spawned part."""
         raise NotImplementedError(f"{type(self).__name__} has no simulator")
 
+    def speed_limits(self, arm: str) -> np.ndarray:
+        """Joint speed limits ``(dof,)`` in rad/s that trajectories for ``arm`` must respect."""
+        return np.ones(len(self.joint_names(arm)))
+
     def sense_depth(self) -> tuple[np.ndarray, np.ndarray]:
         """Simulated depth camera: ``(depth image (h, w) metres, cloud (n, 3) world frame)``."""
+        raise NotImplementedError(f"{type(self).__name__} has no depth camera")
+
+    def camera_pose(self) -> np.ndarray:
+        """``T_world_cam`` (4x4, metres, OpenCV camera frame: z forward, y down) of the depth camera."""
         raise NotImplementedError(f"{type(self).__name__} has no depth camera")
 
     def close(self) -> None:
@@ -328,6 +371,63 @@ class Robot(Plugin):
         self.close()
 
 
+# ---------------------------------------------------------------- assembly planning
+@dataclass
+class AssemblyProblem:
+    """What the assembly planner is asked: put B into A (world frame, metres).
+
+    ``T_world_a`` / ``T_world_b`` are the parts' start poses as detected and
+    corrected; grasps are in each part's frame.
+    """
+
+    part_a: PartModel
+    part_b: PartModel
+    task: AssemblyTask
+    T_world_a: np.ndarray
+    T_world_b: np.ndarray
+    grasps_a: list[Grasp]
+    grasps_b: list[Grasp]
+    table: TablePlane
+
+
+@dataclass
+class AssemblyResult:
+    """A plan for both parts, or how far planning got and why it stopped.
+
+    ``plan`` holds the timed segments found so far even on failure;
+    ``failed_at`` names the part and keyframe; ``T_world_a_goal`` and
+    ``T_world_b_goal`` are where the parts are meant to end.
+    """
+
+    success: bool
+    plan: Plan
+    reason: str | None = None
+    failed_at: str | None = None
+    T_world_a_goal: np.ndarray | None = None
+    T_world_b_goal: np.ndarray | None = None
+    details: dict[str, Any] = field(default_factory=dict)
+    """Planner-specific data for figures (graphs, keyframe searches)."""
+
+
+class AssemblyPlanner(Plugin):
+    """Plans grasps, regrasps and arm motions that assemble B into A."""
+
+    @abc.abstractmethod
+    def plan(
+        self,
+        problem: AssemblyProblem,
+        robot: Robot,
+        motion_planner: MotionPlanner,
+        *,
+        progress: Callable[[str], None] | None = None,
+    ) -> AssemblyResult:
+        """Plan with ``robot``'s kinematics and collision model; never moves its simulator."""
+
+    def write_figures(self, result: AssemblyResult, out_dir: Path) -> dict[str, Path]:
+        """Optional figures of a result (e.g. the regrasp graph); name -> PNG written atomically."""
+        return {}
+
+
 ROLES: dict[str, type[Plugin]] = {
     "teachers": Teacher,
     "detectors": Detector,
@@ -335,5 +435,6 @@ ROLES: dict[str, type[Plugin]] = {
     "grasp_planners": GraspPlanner,
     "motion_planners": MotionPlanner,
     "robots": Robot,
+    "assembly_planners": AssemblyPlanner,
 }
 """Entry-point group suffix (``asmteach.<suffix>``) -> the interface its plugins implement."""

@@ -31,7 +31,7 @@ class DetSettings(StrictModel):
 class ToyDetector(I.Detector):
     Settings = DetSettings
 
-    def detect(self, cloud, part, table=None):
+    def detect(self, cloud, part, table=None, viewpoint=None):
         return Detection(part=part.name, found=False, reason="toy")
 
 
@@ -41,7 +41,7 @@ class ToyTeacher(I.Teacher):
 
 
 class ToyCorrector(I.Corrector):
-    def correct(self, T_world_part, part, table, cloud=None):
+    def correct(self, T_world_part, part, table, cloud=None, viewpoint=None):
         return Correction(T_world_part=T_world_part)
 
 
@@ -68,6 +68,12 @@ class ToyRobot(I.Robot):
     def attach(self, arm, part, T_tcp_part=None): pass
     def in_collision(self, arm, qs, *, ignore=()): return np.zeros(len(qs), bool)
     def clearance(self, arm, qs): return np.ones(len(qs))
+
+
+class ToyAssembly(I.AssemblyPlanner):
+    def plan(self, problem, robot, motion_planner, *, progress=None):
+        from asmteach.core.models import Plan
+        return I.AssemblyResult(success=False, plan=Plan(), reason="toy")
 
 
 class SquareParams(StrictModel):
@@ -112,6 +118,9 @@ toy_motion = toy_asmteach_plugin:ToyMotion
 
 [asmteach.robots]
 toy_robot = toy_asmteach_plugin:ToyRobot
+
+[asmteach.assembly_planners]
+toy_assembly = toy_asmteach_plugin:ToyAssembly
 
 [asmteach.experiments]
 toy_square = toy_asmteach_plugin:Square

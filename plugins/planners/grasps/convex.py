@@ -20,7 +20,6 @@ Part frame, metres.
 from __future__ import annotations
 
 import logging
-import os
 import tempfile
 from pathlib import Path
 
@@ -28,6 +27,7 @@ import manifold3d
 import numpy as np
 import trimesh
 
+from asmteach.core.cstdout import silenced_c_stdout
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Primitive
 
@@ -122,15 +122,10 @@ def _vhacd(mesh: trimesh.Trimesh) -> list[trimesh.Trimesh]:
         src, dst, logf = (str(Path(tmp) / n) for n in ("in.obj", "out.obj", "log.txt"))
         mesh.export(src)
         client = pybullet.connect(pybullet.DIRECT)
-        # V-HACD prints progress on the C stdout; silence it for the run.
-        saved = os.dup(1)
         try:
-            with open(os.devnull, "w") as null:
-                os.dup2(null.fileno(), 1)
+            with silenced_c_stdout():  # V-HACD prints progress on the C stdout
                 pybullet.vhacd(src, dst, logf, resolution=400000, concavity=0.0002, physicsClientId=client)
         finally:
-            os.dup2(saved, 1)
-            os.close(saved)
             pybullet.disconnect(client)
         scene = trimesh.load(dst, force="scene", split_object=True, group_material=False)
         return [g for g in scene.dump() if isinstance(g, trimesh.Trimesh)]

@@ -282,7 +282,8 @@ class ArmRobot(Robot):
         return meshes
 
     def sense_depth(self) -> tuple[np.ndarray, np.ndarray]:
-        """Kinect-v1 depth ``(480, 640)`` metres (NaN = no return) and the world-frame cloud ``(n, 3)``.
+        """Kinect-v1 depth ``(480, 640)`` metres (NaN = no return) and the world-frame cloud ``(n, 3)``
+        of the table and the parts (points on the robot itself are filtered out).
 
         Uses the project's one depth-camera model
         (:mod:`asmteach.plugins.detectors.depth_camera`) at :meth:`camera_pose`.
@@ -291,8 +292,12 @@ class ArmRobot(Robot):
 
         if not hasattr(self, "_depth_cam"):
             self._depth_cam = DepthCamera(KinectSettings(), seed=self.seed)
-        frame = self._depth_cam.render(self._scene_meshes(), self.camera_pose())
-        return frame.depth, frame.points_world
+        meshes = self._scene_meshes()
+        frame = self._depth_cam.render(meshes, self.camera_pose())
+        # Robot self-filter (as robot_self_filter does on a real cell): the cloud keeps the table and
+        # the parts; the depth image keeps everything the sensor saw.
+        n_world = 1 + len(self.sim.parts)
+        return frame.depth, frame.points_world[frame.labels < n_world]
 
     def sense_rgb(self) -> np.ndarray:
         """RGB image ``(480, 640, 3) uint8`` from the same camera pose (PyBullet TinyRenderer)."""

@@ -345,9 +345,40 @@ class Kinematics:
     # ------------------------------------------------------------ batch FK (for collision checking)
     def moving_joints(self, arm: str) -> list[int]:
         """Ids of the joints whose world pose depends on the arm's joints (chain and descendants)."""
+        cache = self.__dict__.setdefault("_moving_cache", {})
+        if arm not in cache:
+            first = self.chain(arm).joint_ids[0]
+            cache[arm] = [j for j in range(1, self.model.njoints) if first in list(self.model.supports[j])]
+        return list(cache[arm])
+
+    def _joint_plan(self, arm: str) -> tuple[list[np.ndarray], list[tuple]]:
+        """Static joint poses at ``q_full`` and the arm's per-joint recipe, cached until ``q_full`` changes.
+
+        Single-configuration collision queries (one per planner state) spent most
+        of their time recomputing these.
+        """
+        key = self.q_full.tobytes()
+        cache = self.__dict__.setdefault("_plan_cache", {})
+        hit = cache.get(arm)
+        if hit is not None and hit[0] == key:
+            return hit[1], hit[2]
         c = self.chain(arm)
-        first = c.joint_ids[0]
-        return [j for j in range(1, self.model.njoints) if first in list(self.model.supports[j])]
+        m, d = self.model, self.data
+        pin.forwardKinematics(m, d, self.q_full)
+        static = [self.T_world_base @ d.oMi[j].homogeneous for j in range(m.njoints)]
+        steps = []
+        for j in self.moving_joints(arm):
+            parent = m.parents[j]
+            M = m.jointPlacements[j].homogeneous
+            if j in c.joint_ids:
+                S = np.asarray(d.joints[j].S).reshape(6, -1)[:, 0]  # motion subspace: (linear, angular)
+                steps.append((j, parent, M, S, c.joint_ids.index(j), None))
+            else:
+                # not an arm joint: its own displacement stays at q_full
+                fixed = np.linalg.solve(M, np.linalg.solve(static[parent], static[j]))[None]
+                steps.append((j, parent, M, None, -1, fixed))
+        cache[arm] = (key, static, steps)
+        return static, steps
 
     def batch_joint_poses(self, arm: str, qs: np.ndarray) -> tuple[dict[int, np.ndarray], list[np.ndarray]]:
         """World poses of every joint frame for ``n`` arm configurations, vectorised with numpy.
@@ -357,25 +388,13 @@ class Kinematics:
         index 0 being the URDF root. Uses the joint placements and motion axes of
         the pinocchio model; checked against pinocchio's FK in the tests.
         """
-        c = self.chain(arm)
-        m, d = self.model, self.data
         qs = np.atleast_2d(np.asarray(qs, dtype=float))
         n = qs.shape[0]
-        pin.forwardKinematics(m, d, self.q_full)
-        static = [self.T_world_base @ d.oMi[j].homogeneous for j in range(m.njoints)]
+        static, steps = self._joint_plan(arm)
         moving: dict[int, np.ndarray] = {}
-        for j in self.moving_joints(arm):
-            parent = m.parents[j]
+        for j, parent, M, S, k, fixed in steps:
             T_parent = moving[parent] if parent in moving else np.broadcast_to(static[parent], (n, 4, 4))
-            M = m.jointPlacements[j].homogeneous
-            if j in c.joint_ids:
-                k = c.joint_ids.index(j)
-                S = np.asarray(d.joints[j].S).reshape(6, -1)[:, 0]  # motion subspace: (linear, angular)
-                motion = _axis_motion(S, qs[:, k])
-            else:
-                # not an arm joint: its own displacement stays at q_full
-                motion = np.linalg.solve(M, np.linalg.solve(static[parent], static[j]))[None]
-            moving[j] = T_parent @ (M @ motion)
+            moving[j] = T_parent @ (M @ (_axis_motion(S, qs[:, k]) if S is not None else fixed))
         return moving, static
 
 

@@ -11,11 +11,15 @@ Give ``base_pose`` to place the WAIST anywhere else.
 Arms ``"left"`` and ``"right"``: ``LARM_JOINT0..5`` / ``RARM_JOINT0..5``,
 with ``use_chest: true`` preceded by ``CHEST_JOINT0`` (7 DOF; moving the
 chest moves both arms). The TCP is ``*ARM_TCP_Link`` of the two-finger
-gripper (see :mod:`asmteach.plugins.robots.nextage.hand`). Home is the
-upstream init pose ("goInitial").
+gripper (see :mod:`asmteach.plugins.robots.nextage.hand`). Home is, by
+default, a *ready* pose with the hands 0.15 m above the table, pointing down,
+behind the workspace as the camera sees it; the upstream init pose
+("goInitial") leaves the fingertips 3 cm above the table top, where parts lie.
 """
 
 from __future__ import annotations
+
+from typing import Literal
 
 import numpy as np
 from pydantic import Field
@@ -27,13 +31,19 @@ from asmteach.plugins.robots.nextage.build_urdf import GRIPPER, URDF_PATH
 from asmteach.plugins.robots.nextage.hand import nextage_hand
 from asmteach.plugins.robots.nextage.sim import GripperJoints
 
-__all__ = ["INIT_POSE", "SRDF_DISABLED", "NextagePyBullet"]
+__all__ = ["INIT_POSE", "READY_POSE", "SRDF_DISABLED", "NextagePyBullet"]
 
 INIT_POSE = {
     "left": np.radians([0.6, 0.0, -100.0, -15.2, 9.4, -3.2]),
     "right": np.radians([-0.6, 0.0, -100.0, 15.2, 9.4, 3.2]),
 }
 """Upstream init pose ("goInitial", SRDF init_rtm), radians."""
+
+READY_POSE = {
+    "left": np.radians([-6.3, 11.1, -141.1, -19.6, 40.0, -6.4]),
+    "right": np.radians([6.3, 11.1, -141.1, 19.6, 40.0, 6.4]),
+}
+"""Hands pointing down 0.15 m above the table at x = 0.25, y = +-0.20 (IK of that pose), radians."""
 
 _PREFIX = {"left": "LARM", "right": "RARM"}
 
@@ -63,6 +73,9 @@ class NextageSettings(ArmRobotSettings):
     waist_above_table: float = Field(0.17, ge=-0.5, le=1.0, description="WAIST height above the table top")
     base_pose: Mat4 | None = Field(None, description="T_world_waist; default: (0, 0, table_height + waist_above_table)")
     use_chest: bool = Field(False, description="arms include CHEST_JOINT0 (7 DOF)")
+    home_pose: Literal["ready", "init"] = Field(
+        "ready", description="home: hands 0.15 m above the table (ready) or the upstream init pose"
+    )
 
 
 class NextagePyBullet(ArmRobot):
@@ -81,7 +94,7 @@ class NextagePyBullet(ArmRobot):
         arms = {}
         for arm, pre in _PREFIX.items():
             joints = [f"{pre}_JOINT{k}" for k in range(6)]
-            home = INIT_POSE[arm]
+            home = (READY_POSE if st.home_pose == "ready" else INIT_POSE)[arm]
             if st.use_chest:
                 joints = ["CHEST_JOINT0", *joints]
                 home = np.concatenate([[0.0], home])

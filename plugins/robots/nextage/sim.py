@@ -28,6 +28,7 @@ import pybullet
 from pybullet_utils import bullet_client
 
 from asmteach.core import geometry
+from asmteach.core.cstdout import silenced_c_stdout
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
 
@@ -154,8 +155,9 @@ class PyBulletWorld:
             out = Path(self._tmp.name) / f"{key}_vhacd.obj"
             mesh.export(src)
             # Small parts need a fine voxel grid to keep holes and slots open.
-            self.p.vhacd(str(src), str(out), str(Path(self._tmp.name) / "vhacd.log"), resolution=200000,
-                         concavity=0.0005, maxNumVerticesPerCH=64, minVolumePerCH=1e-7)
+            with silenced_c_stdout():  # V-HACD prints progress on the C stdout
+                self.p.vhacd(str(src), str(out), str(Path(self._tmp.name) / "vhacd.log"), resolution=200000,
+                             concavity=0.0005, maxNumVerticesPerCH=64, minVolumePerCH=1e-7)
             self._vhacd_cache[key] = str(out)
         return self.p.createCollisionShape(pybullet.GEOM_MESH, fileName=self._vhacd_cache[key])
 

@@ -1,0 +1,418 @@
+"""The whole pipeline in simulation: teach, spawn, sense, detect, correct, grasp, plan, execute, measure.
+
+Every stage calls the configured plugin through its role interface only;
+hooks announce each stage (progress bars, reporters). A stage that fails ends
+the run as a *result*: ``report.json`` records the stage and the reason, and
+everything written so far stays valid (all writes are atomic).
+
+Frames and units: world frame z up, metres and radians inside; reports in mm
+and degrees. ``T_A_B`` is B's pose in A's frame; errors of the achieved
+assembly are measured in A's frame from the simulator's poses.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import Field, ValidationError
+
+from asmteach.core import geometry, registry
+from asmteach.core.config import ROLE_OF_KEY, RunConfig, format_validation_error, validate_settings
+from asmteach.core.errors import UserError
+from asmteach.core.interfaces import AssemblyProblem, PartModel, Robot
+from asmteach.core.io import write_json, write_model
+from asmteach.core.models import AssemblyTask, Detection, Plan, RunReport, StageOutcome, StrictModel, TablePlane
+from asmteach.core.parts import build_part, load_structure
+from asmteach.core.scene import SceneSettings, random_start_poses
+
+__all__ = ["ExecutionSettings", "StageFailed", "assembly_errors", "run_pipeline"]
+
+
+class ExecutionSettings(StrictModel):
+    """The config's ``execution`` section: the simulated world and what is recorded."""
+
+    scene: SceneSettings = Field(default_factory=SceneSettings)
+    animation: bool = Field(True, description="record an animated GIF of the execution")
+    animation_fps: float = Field(4.0, gt=0.0, le=30.0, description="frames per simulated second in the GIF")
+    success_position_mm: float = Field(2.0, gt=0.0, description="B in A: position tolerance")
+    success_angle_deg: float = Field(2.0, gt=0.0, description="B in A: rotation tolerance")
+    success_a_goal_mm: float = Field(3.0, gt=0.0, description="A at its goal: position tolerance")
+
+
+class StageFailed(Exception):
+    """A stage could not produce its result; the run ends as a recorded failure."""
+
+    def __init__(self, reason: str, details: dict[str, Any] | None = None) -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.details = details or {}
+
+
+def pose_error(T_est: np.ndarray, T_true: np.ndarray) -> dict[str, float]:
+    """Position (mm) and rotation (deg) error of an estimated pose."""
+    return {
+        "position_mm": 1000.0 * geometry.translation_distance(T_est, T_true),
+        "angle_deg": float(np.degrees(geometry.rotation_distance(T_est[:3, :3], T_true[:3, :3]))),
+    }
+
+
+def assembly_errors(T_A_B_achieved: np.ndarray, T_A_B_ref: np.ndarray) -> dict[str, float]:
+    """Error of an achieved B-in-A pose against a reference, in A's frame (mm, deg)."""
+    return pose_error(T_A_B_achieved, T_A_B_ref)
+
+
+def symmetric_surface_error(part: PartModel, T_est: np.ndarray, T_true: np.ndarray, n: int = 500) -> float:
+    """Mean distance (mm) from the part's surface at ``T_est`` to its surface at ``T_true`` (ADD-S).
+
+    Unlike the raw pose error, it is zero for a pose that differs by one of
+    the part's symmetries, which is what matters for grasping it.
+    """
+    from scipy.spatial import cKDTree
+
+    pts = part.mesh.sample(n, return_index=False) if len(part.mesh.vertices) < n else part.mesh.vertices
+    pts = np.asarray(pts, float)[:n] if len(pts) > n else np.asarray(pts, float)
+    a = geometry.transform_points(T_est, pts)
+    b = geometry.transform_points(T_true, np.asarray(part.mesh.sample(4000, return_index=False), float))
+    d, _ = cKDTree(b).query(a)
+    return float(1000.0 * d.mean())
+
+
+class _Run:
+    """State of one run: config, plugins, outputs, hooks."""
+
+    def __init__(self, cfg: RunConfig, out_dir: Path, pm: Any | None) -> None:
+        self.cfg, self.out, self.pm = cfg, Path(out_dir), pm
+        self.report = RunReport(config=cfg.model_dump(mode="json"), seed=cfg.seed)
+        try:
+            self.execution = ExecutionSettings.model_validate(cfg.execution)
+        except ValidationError as exc:
+            raise UserError(format_validation_error(exc, "execution")) from None
+
+    def plugin(self, key: str) -> Any:
+        choice = getattr(self.cfg, key)
+        cls = registry.get_class(ROLE_OF_KEY[key], choice.plugin)
+        return cls(validate_settings(cls, choice.settings, where=f"{key}.settings"), seed=self.cfg.seed)
+
+    def hook(self, name: str, **kwargs: Any) -> Any:
+        if self.pm is None:
+            return None
+        return getattr(self.pm.hook, name)(**kwargs)
+
+    def progress(self, stage: str) -> Callable[[str], None]:
+        return lambda msg: self.hook("asmteach_stage_progress", stage=stage, advance=0, message=msg)
+
+    def artefact(self, name: str, path: Path, kind: str) -> None:
+        self.report.artefacts[name] = str(Path(path).relative_to(self.out)) if Path(path).is_relative_to(
+            self.out) else str(path)
+        self.hook("asmteach_artefact_written", path=Path(path), kind=kind)
+
+    @contextmanager
+    def stage(self, name: str, total: int | None = None) -> Iterator[dict[str, Any]]:
+        details: dict[str, Any] = {}
+        self.hook("asmteach_stage_started", stage=name, total=total,
+                  context={"out_dir": str(self.out), "seed": self.cfg.seed, "config": self.cfg.name})
+        t0 = time.perf_counter()
+        try:
+            yield details
+        except (StageFailed, UserError) as exc:
+            seconds = time.perf_counter() - t0
+            reason = exc.reason if isinstance(exc, StageFailed) else str(exc)
+            if isinstance(exc, StageFailed):
+                details.update(exc.details)
+            self.report.stages.append(StageOutcome(stage=name, ok=False, seconds=round(seconds, 3), reason=reason,
+                                                   details=_jsonable(details)))
+            self.report.failed_stage, self.report.reason = name, reason
+            self.hook("asmteach_stage_finished", stage=name, ok=False, seconds=seconds, summary={"reason": reason})
+            raise StageFailed(reason) from None
+        seconds = time.perf_counter() - t0
+        self.report.stages.append(StageOutcome(stage=name, ok=True, seconds=round(seconds, 3),
+                                               details=_jsonable(details)))
+        self.hook("asmteach_stage_finished", stage=name, ok=True, seconds=seconds,
+                  summary={k: v for k, v in details.items() if isinstance(v, (int, float, str))})
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.floating, np.integer)):
+        return obj.item()
+    if isinstance(obj, (str, int, float, bool)) or obj is None:
+        return obj
+    return str(obj)
+
+
+def run_pipeline(cfg: RunConfig, out_dir: Path, *, pm: Any | None = None) -> RunReport:
+    """Run the whole pipeline of ``cfg`` into ``out_dir``; the report is returned and written.
+
+    Raises :class:`UserError` only for bad input found before anything runs
+    (config, structure file); every later failure is recorded in the report.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    run = _Run(cfg, out, pm)
+    structure = cfg.path(cfg.structure)
+    true_task = load_structure(structure)
+    part_a, part_b = build_part(true_task.part_a), build_part(true_task.part_b)
+    robot: Robot | None = None
+    try:
+        learned = _teach(run, true_task)
+        robot = run.plugin("robot")
+        table = TablePlane(height=cfg.table.height)
+        truth = _spawn(run, robot, part_a, part_b, table)
+        detections = _detect(run, robot, (part_a, part_b), table, truth)
+        grasps = _grasps(run, robot, part_a, part_b)
+        result = _plan(run, robot, learned, part_a, part_b, detections, grasps, table)
+        frames = _execute(run, robot, result.plan)
+        if frames:
+            _write_animation(run, frames)
+        _measure(run, robot, learned, true_task, part_a, part_b, result)
+    except StageFailed:
+        pass
+    finally:
+        if robot is not None:
+            robot.close()
+    _finish(run)
+    return run.report
+
+
+# ---------------------------------------------------------------- stages
+def _teach(run: _Run, true_task: AssemblyTask) -> AssemblyTask:
+    with run.stage("teach") as d:
+        teacher = run.plugin("teacher")
+        camera_file = run.cfg.path(run.cfg.camera) if run.cfg.camera else None
+        frames, camera = teacher.demonstrate(true_task, run.cfg.demo, camera_file, run.out / "demonstration")
+        d["frames"] = len(frames)
+        learned = teacher.teach(frames, camera, true_task)
+        err = assembly_errors(learned.T_A_B, true_task.T_A_B)
+        v_true = np.asarray(true_task.v_a, float)
+        v_err = float(np.degrees(np.arccos(np.clip(np.dot(learned.v_a, v_true) / np.linalg.norm(v_true), -1, 1))))
+        d.update(T_A_B_error_mm=round(err["position_mm"], 4), T_A_B_error_deg=round(err["angle_deg"], 4),
+                 v_a_error_deg=round(v_err, 4))
+        run.report.task = learned
+        run.report.metrics.update(teach_position_mm=err["position_mm"], teach_angle_deg=err["angle_deg"],
+                                  teach_v_a_deg=v_err)
+        write_model(run.out / "task.json", learned)
+        run.artefact("task", run.out / "task.json", "json")
+        return learned
+
+
+def _spawn(run: _Run, robot: Robot, a: PartModel, b: PartModel, table: TablePlane) -> dict[str, np.ndarray]:
+    with run.stage("spawn") as d:
+        rng = np.random.default_rng([run.cfg.seed, 11])
+        T_a, T_b = random_start_poses([a, b], table.height, run.execution.scene, rng)
+        robot.reset_world(table, {a.name: (a, T_a), b.name: (b, T_b)})
+        # the simulator's poses are the truth (a part may settle slightly)
+        truth = {a.name: robot.part_pose(a.name), b.name: robot.part_pose(b.name)}
+        for name, T in truth.items():
+            d[name] = geometry.to_xyz_mm_rpy_deg(T)
+        return truth
+
+
+def _detect(run: _Run, robot: Robot, parts: tuple[PartModel, ...], table: TablePlane,
+            truth: dict[str, np.ndarray]) -> dict[str, Detection]:
+    with run.stage("detect", total=len(parts)) as d:
+        detector = run.plugin("detector")
+        corrector = run.plugin("corrector") if run.cfg.corrector is not None else None
+        depth, cloud = robot.sense_depth()
+        try:
+            viewpoint = robot.camera_pose()[:3, 3]
+        except NotImplementedError:
+            viewpoint = None
+        np.save(run.out / "depth.npy", depth.astype(np.float32))
+        out: dict[str, Detection] = {}
+        for part in parts:
+            detector.prepare(part)
+            det = detector.detect(cloud, part, table, viewpoint=viewpoint)
+            if not det.found or det.rough is None:
+                run.report.detections.append(det)
+                raise StageFailed(f"{part.name} not found: {det.reason}")
+            if corrector is not None:
+                segment = _segment_near(cloud, part, det.rough)
+                corr = corrector.correct(det.rough, part, table, segment, viewpoint=viewpoint)
+                det.corrected = corr.T_world_part
+                det.details["placement_id"] = corr.placement_id
+            T_true = truth[part.name]
+            det.details["T_world_part_true"] = T_true.tolist()
+            for key in ("rough", "corrected"):
+                T = getattr(det, key)
+                if T is not None:
+                    err = pose_error(T, T_true)
+                    err["surface_mm"] = symmetric_surface_error(part, T, T_true)
+                    det.details[f"{key}_error"] = err
+            out[part.name] = det
+            run.report.detections.append(det)
+            best = det.details.get("corrected_error") or det.details["rough_error"]
+            d[part.name] = {k: round(v, 3) for k, v in best.items()}
+            run.report.metrics[f"detect_{part.name}_surface_mm"] = best["surface_mm"]
+            run.hook("asmteach_stage_progress", stage="detect", advance=1, message=part.name)
+        from asmteach.core.run_figures import detection_figure
+
+        path = detection_figure(run.out / "detection.png", depth, cloud, parts, out, truth)
+        run.artefact("detection", path, "png")
+        return out
+
+
+def _segment_near(cloud: np.ndarray, part: PartModel, T: np.ndarray, radius: float = 0.01) -> np.ndarray:
+    """Cloud points within ``radius`` metres of the part's surface at ``T`` (its observed segment)."""
+    from scipy.spatial import cKDTree
+
+    pts = cloud[np.all(np.isfinite(cloud), axis=1)]
+    surface = geometry.transform_points(T, np.asarray(part.mesh.sample(3000, return_index=False), float))
+    d, _ = cKDTree(surface).query(pts, distance_upper_bound=radius)
+    return pts[np.isfinite(d)]
+
+
+def _grasps(run: _Run, robot: Robot, a: PartModel, b: PartModel) -> dict[str, list]:
+    with run.stage("grasps", total=2) as d:
+        planner = run.plugin("grasp_planner")
+        out = {}
+        for part in (a, b):
+            gs = planner.plan(part, robot.hand)
+            if not gs:
+                raise StageFailed(f"no force-closure grasp of {part.name} for this hand")
+            out[part.name] = gs
+            d[part.name] = len(gs)
+            run.hook("asmteach_stage_progress", stage="grasps", advance=1, message=part.name)
+        return out
+
+
+def _plan(run: _Run, robot: Robot, task: AssemblyTask, a: PartModel, b: PartModel,
+          detections: dict[str, Detection], grasps: dict[str, list], table: TablePlane) -> Any:
+    with run.stage("plan") as d:
+        planner = run.plugin("assembly_planner")
+        motion = run.plugin("motion_planner")
+        problem = AssemblyProblem(a, b, task, detections[a.name].best, detections[b.name].best,
+                                  grasps[a.name], grasps[b.name], table)
+        result = planner.plan(problem, robot, motion, progress=run.progress("plan"))
+        for name, path in planner.write_figures(result, run.out).items():
+            run.artefact(name, path, "png")
+        run.report.plan_stats = _jsonable(result.plan.stats)
+        d.update(segments=len(result.plan.segments),
+                 planning_seconds=result.plan.stats.get("planning_seconds"),
+                 execution_seconds=result.plan.stats.get("execution_seconds"))
+        write_model(run.out / "plan.json", result.plan)
+        run.artefact("plan", run.out / "plan.json", "json")
+        if not result.success:
+            raise StageFailed(result.reason or "assembly planning failed", {"failed_at": result.failed_at})
+        return result
+
+
+def _execute(run: _Run, robot: Robot, plan: Plan) -> list[np.ndarray]:
+    frames: list[np.ndarray] = []
+    with run.stage("execute", total=len(plan.segments)) as d:
+        record = run.execution.animation and hasattr(robot, "sense_rgb")
+        period = 1.0 / run.execution.animation_fps
+        if record:
+            frames.append(robot.sense_rgb())
+        held_failures = []
+        for seg in plan.segments:
+            if seg.trajectory is not None:
+                for chunk in _chunks(seg.trajectory, period if record else None):
+                    robot.execute(chunk)
+                    if record:
+                        frames.append(robot.sense_rgb())
+            elif seg.gripper is not None:
+                ok = robot.grip(seg.gripper.arm, seg.gripper.action == "close", seg.gripper.attach)
+                if seg.gripper.action == "close" and not ok:
+                    held_failures.append(seg.label)
+                    raise StageFailed(f"{seg.label}: the fingers did not close on the part")
+            run.hook("asmteach_stage_progress", stage="execute", advance=1, message=seg.label)
+        d["segments"] = len(plan.segments)
+        d["frames_recorded"] = len(frames)
+    return frames
+
+
+def _chunks(traj: Any, period: float | None) -> list[Any]:
+    """Split a trajectory into pieces of about ``period`` seconds (for animation frames)."""
+    if period is None or traj.times[-1] <= period:
+        return [traj]
+    times = np.asarray(traj.times)
+    cuts = [0]
+    next_t = period
+    for i, t in enumerate(times):
+        if t >= next_t:
+            cuts.append(i)
+            next_t = t + period
+    if cuts[-1] != len(times) - 1:
+        cuts.append(len(times) - 1)
+    out = []
+    for i0, i1 in itertools.pairwise(cuts):
+        if i1 <= i0:
+            continue
+        t = times[i0 : i1 + 1] - times[i0]
+        out.append(type(traj)(arm=traj.arm, joint_names=traj.joint_names, times=t.tolist(),
+                              positions=np.asarray(traj.positions)[i0 : i1 + 1]))
+    return out
+
+
+def _measure(run: _Run, robot: Robot, learned: AssemblyTask, true_task: AssemblyTask, a: PartModel, b: PartModel,
+             result: Any) -> None:
+    with run.stage("measure") as d:
+        T_a, T_b = robot.part_pose(a.name), robot.part_pose(b.name)
+        T_A_B = geometry.invert(T_a) @ T_b
+        vs_taught = assembly_errors(T_A_B, learned.T_A_B)
+        vs_true = assembly_errors(T_A_B, true_task.T_A_B)
+        a_goal_mm = 1000.0 * geometry.translation_distance(T_a, result.T_world_a_goal)
+        ex = run.execution
+        ok = (vs_taught["position_mm"] <= ex.success_position_mm and vs_taught["angle_deg"] <= ex.success_angle_deg
+              and a_goal_mm <= ex.success_a_goal_mm)
+        run.report.metrics.update(
+            achieved_vs_taught_mm=vs_taught["position_mm"], achieved_vs_taught_deg=vs_taught["angle_deg"],
+            achieved_vs_true_mm=vs_true["position_mm"], achieved_vs_true_deg=vs_true["angle_deg"],
+            a_goal_error_mm=a_goal_mm,
+        )
+        d.update({k: round(v, 3) for k, v in run.report.metrics.items() if k.startswith(("achieved", "a_goal"))})
+        write_json(run.out / "achieved.json", {"T_world_A": T_a.tolist(), "T_world_B": T_b.tolist(),
+                                               "T_A_B": T_A_B.tolist(), "T_A_B_taught": learned.T_A_B.tolist(),
+                                               "T_A_B_true": true_task.T_A_B.tolist()})
+        run.report.success = bool(ok)
+        if not ok:
+            raise StageFailed(
+                f"assembled outside tolerance: B in A off by {vs_taught['position_mm']:.2f} mm / "
+                f"{vs_taught['angle_deg']:.2f} deg (limits {ex.success_position_mm} mm / {ex.success_angle_deg} deg), "
+                f"A {a_goal_mm:.2f} mm from its goal (limit {ex.success_a_goal_mm} mm)"
+            )
+
+
+def _write_animation(run: _Run, frames: list[np.ndarray]) -> None:
+    from PIL import Image
+
+    from asmteach.core.io import atomic_path
+
+    path = run.out / "execution.gif"
+    images = [Image.fromarray(np.asarray(f, dtype=np.uint8)) for f in frames]
+    with atomic_path(path) as tmp:
+        images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:],
+                       duration=int(1000 / run.execution.animation_fps), loop=0)
+    run.artefact("animation", path, "gif")
+
+
+def _finish(run: _Run) -> None:
+    from asmteach.core.run_figures import metrics_figure
+
+    if run.report.metrics:
+        path = metrics_figure(run.out / "errors.png", run.report)
+        run.artefact("errors", path, "png")
+    write_model(run.out / "report.json", run.report)
+    extra = run.hook("asmteach_report_ready", report=run.report.model_dump(mode="json"), out_dir=run.out)
+    for paths in extra or []:
+        for p in paths or []:
+            run.report.artefacts.setdefault(Path(p).name, str(p))
+    try:
+        from asmteach.core.report_html import write_report_html
+    except ImportError:  # pragma: no cover - the HTML writer ships with the core
+        write_report_html = None
+    if write_report_html is not None:
+        html = write_report_html(run.report, run.out)
+        run.report.artefacts["html"] = str(Path(html).relative_to(run.out))
+    write_model(run.out / "report.json", run.report)

@@ -1,0 +1,485 @@
+"""Moving one part from its start pose to a goal pose, through regrasps if needed.
+
+For a part, a three-layer regrasp graph (start pose / stable placements at
+sampled yaws at the start position / goal pose) is searched for keyframes;
+arm motions between keyframes come from the configured motion planner;
+approaches, lifts and the final insertion are straight Cartesian lines. When
+a motion between two keyframes fails, that edge is banned and the graph
+searched again, within a time budget.
+
+The middle layer is built lazily: when the start and goal layers already share
+a grasp, the cheapest path never regrasps (each regrasp costs
+``regrasp_penalty``, more than any difference in transfer motion), so the
+intermediate placements are evaluated only when that search fails.
+
+Frames: ``T_world_*`` 4x4 in metres; joint paths in radians.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import networkx as nx
+import numpy as np
+from pydantic import Field
+
+from asmteach.core.geometry import compose, from_rotation, rot_z
+from asmteach.core.interfaces import MotionPlanner, Obstacle, PartModel, Robot
+from asmteach.core.models import Grasp, GripperEvent, Placement, StrictModel
+from asmteach.plugins.planners.motion.batch import batched
+from asmteach.plugins.planners.motion.interpolate import densify
+from asmteach.plugins.planners.motion.trrt import inverse_clearance_cost
+from asmteach.plugins.planners.regrasp.feasibility import (
+    ScreenSettings,
+    approach_offset,
+    evaluate_slot,
+    screened_ids,
+    variant_tcp,
+)
+from asmteach.plugins.planners.regrasp.graph import (
+    GOAL,
+    START,
+    GraspFeasibility,
+    KeyframeSearch,
+    PoseSlot,
+    build_regrasp_graph,
+    search_keyframes,
+)
+
+__all__ = [
+    "AssemblySettings",
+    "PlaceGoal",
+    "Step",
+    "TransferResult",
+    "cartesian_path",
+    "placement_slots",
+    "plan_transfer",
+]
+
+
+class AssemblySettings(StrictModel):
+    """How keyframes and motions are chosen. Distances in metres, angles in radians, times in seconds."""
+
+    retract: float = Field(0.05, gt=0.0, le=0.5, description="pre-assembly retraction of B along -v_a")
+    goal_xy: tuple[float, float] = Field((0.40, 0.0), description="where A is assembled on the table (world x, y)")
+    goal_yaw: float = Field(0.0, description="yaw of A's goal placement about the table normal")
+    placement_yaws: int = Field(4, ge=1, le=24, description="evenly sampled yaws per stable placement")
+    max_placements: int = Field(4, ge=0, le=32, description="most probable placements used as middle layers")
+    max_candidates: int = Field(40, ge=1, le=500, description="grasps solved by IK per slot after screening")
+    min_down: float = Field(0.3, ge=-1.0, le=1.0, description="cosine: approach to a part on the table from above")
+    pregrasp_distance: float = Field(0.06, gt=0.0, description="approach stand-off along the TCP -z")
+    lift: float = Field(0.08, gt=0.0, description="lift above the table after grasping / before placing")
+    cartesian_step: float = Field(0.004, gt=0.0, description="TCP step of straight-line motions")
+    regrasp_penalty: float = Field(10.0, ge=0.0, description="graph weight of one regrasp")
+    motion_weight: float = Field(1.0, ge=0.0, description="graph weight per radian of joint motion")
+    motion_time_limit: float = Field(5.0, gt=0.0, description="per motion query")
+    time_budget: float = Field(60.0, gt=0.0, description="per part; re-searches stop after it")
+    acceleration: float = Field(2.0, gt=0.0, description="joint acceleration limit of the timed paths, rad/s^2")
+
+
+@dataclass(frozen=True)
+class PlaceGoal:
+    """Where a part must end: its pose, how it comes in, and what it may touch there."""
+
+    slot: PoseSlot
+    approach: np.ndarray
+    """World vector (metres) from the placed pose back to where the straight final move starts."""
+    touch: tuple[str, ...] = ("table",)
+    """Obstacles the held part may touch on the final move (intended contact)."""
+    on_table: bool = True
+    """True when the part rests on the table at the goal (grasps then must come from above)."""
+
+
+@dataclass
+class Step:
+    """One step of a plan: an untimed joint path of one arm, or a gripper event."""
+
+    label: str
+    kind: Literal["path", "gripper"]
+    arm: str
+    path: np.ndarray | None = None
+    event: GripperEvent | None = None
+
+
+@dataclass
+class TransferResult:
+    """Outcome of moving one part."""
+
+    success: bool
+    steps: list[Step] = field(default_factory=list)
+    search: KeyframeSearch | None = None
+    graph: nx.Graph | None = None
+    reason: str | None = None
+    stats: dict[str, Any] = field(default_factory=dict)
+    q_end: dict[str, np.ndarray] = field(default_factory=dict)
+    keyframes: list[dict[str, Any]] = field(default_factory=list)
+
+
+class _MotionFailure(Exception):
+    """A keyframe motion failed; ``edge`` is the graph edge to ban."""
+
+    def __init__(self, edge: tuple[Any, Any], reason: str) -> None:
+        super().__init__(reason)
+        self.edge = edge
+        self.reason = reason
+
+
+def placement_slots(
+    placements: Sequence[Placement], xy: Sequence[float], table_height: float, settings: AssemblySettings
+) -> list[PoseSlot]:
+    """Middle-layer slots: the most probable distinct placements at evenly sampled yaws at ``xy``.
+
+    Placements that are the same up to the part's own symmetry (a square peg
+    lying on any of its four sides) have the same centre-of-mass height,
+    support area and margin; only the first of them is kept.
+    """
+    chosen: list[Placement] = []
+    seen: set[tuple[float, float, float]] = set()
+    for p in sorted(placements, key=lambda p: -p.probability):
+        sig = (round(float(p.T_table_part[2, 3]) * 2000.0), round(_area(p.support_polygon) * 1e6), round(p.margin, 3))
+        if sig in seen:
+            continue
+        seen.add(sig)
+        chosen.append(p)
+    chosen = chosen[: settings.max_placements]
+    slots = []
+    for p in chosen:
+        for k in range(settings.placement_yaws):
+            yaw = 2.0 * np.pi * k / settings.placement_yaws
+            T = compose(from_rotation(np.eye(3), [xy[0], xy[1], table_height]), rot_z(yaw), p.T_table_part)
+            slots.append(PoseSlot(f"placement{p.id}_yaw{round(np.degrees(yaw))}", "middle", T))
+    return slots
+
+
+def _area(polygon: np.ndarray) -> float:
+    x, y = np.asarray(polygon, float).T
+    return 0.5 * abs(float(np.dot(x, np.roll(y, 1)) - np.dot(y, np.roll(x, 1))))
+
+
+def cartesian_path(
+    robot: Robot, arm: str, q_start: np.ndarray, T_goal: np.ndarray, step: float
+) -> tuple[np.ndarray | None, str | None]:
+    """Joint path moving the TCP on a straight line to ``T_goal`` (orientation kept; IK per step)."""
+    T0 = robot.fk(arm, q_start)
+    dist = float(np.linalg.norm(T_goal[:3, 3] - T0[:3, 3]))
+    n = max(2, int(np.ceil(dist / step)) + 1)
+    path = [np.asarray(q_start, float)]
+    for s in np.linspace(0.0, 1.0, n)[1:]:
+        T = T_goal.copy()
+        T[:3, 3] = (1.0 - s) * T0[:3, 3] + s * T_goal[:3, 3]
+        res = robot.ik(arm, T, q_seed=path[-1])
+        if not res.success or res.q is None or getattr(res, "flipped", False):
+            return None, f"IK fails {s * dist * 1000:.0f} mm along the straight line"
+        if np.max(np.abs(res.q - path[-1])) > 0.3:
+            return None, "the straight line crosses a singularity or a change of IK branch"
+        path.append(np.asarray(res.q, float))
+    return np.asarray(path), None
+
+
+def _grasp_dict(grasps: Sequence[Grasp]) -> dict[int, Grasp]:
+    return {g.id: g for g in grasps}
+
+
+def plan_transfer(
+    robot: Robot,
+    planner: MotionPlanner,
+    part: PartModel,
+    grasps: Sequence[Grasp],
+    *,
+    T_start: np.ndarray,
+    goal: PlaceGoal,
+    middle_slots: Callable[[], Sequence[PoseSlot]],
+    world: Sequence[Obstacle],
+    q_now: dict[str, np.ndarray],
+    settings: AssemblySettings,
+    progress: Callable[[str], None] | None = None,
+) -> TransferResult:
+    """Move ``part`` from ``T_start`` to ``goal``; the arms end at home.
+
+    ``world`` holds the table (named ``"table"``) and the other obstacles,
+    not this part. ``middle_slots`` is called only if intermediate placements
+    are needed. Paths are untimed; see :func:`asmteach.plugins.planners.regrasp.plan_io.to_plan`.
+    """
+    t0 = time.perf_counter()
+    by_id = _grasp_dict(grasps)
+    arms = list(robot.arms)
+    screen = ScreenSettings(
+        max_candidates=settings.max_candidates,
+        min_down=settings.min_down,
+        pregrasp_distance=settings.pregrasp_distance,
+    )
+    seeds = {k: np.asarray(v, float).copy() for k, v in q_now.items()}
+    start_slot = PoseSlot("start", "start", np.asarray(T_start, float))
+    start = evaluate_slot(robot, start_slot, grasps, arms, world, settings=screen, seeds=seeds)
+    shared = {vid // 2 for vid, _ in start.solutions}
+    end = evaluate_slot(
+        robot, goal.slot, grasps, arms, world, settings=screen, on_table=goal.on_table, prefer=shared, seeds=seeds
+    )
+    layers: list[GraspFeasibility] = [start, end]
+    stats: dict[str, Any] = {"feasible": {"start": len(start.solutions), "goal": len(end.solutions)}}
+    G = build_regrasp_graph(layers, regrasp_penalty=settings.regrasp_penalty, motion_weight=settings.motion_weight)
+    middle_done = False
+    banned: list[tuple[Any, Any]] = []
+    last_reason: str | None = None
+    stats["graph_seconds"] = time.perf_counter() - t0
+    stats["search_seconds"] = 0.0
+    stats["motion_seconds"] = 0.0
+    attempts = 0
+    while True:
+        ts = time.perf_counter()
+        search = search_keyframes(G, banned_edges=banned)
+        stats["search_seconds"] += time.perf_counter() - ts
+        if not search.success and not middle_done and settings.max_placements > 0:
+            tg = time.perf_counter()
+            prefer = {vid // 2 for f in layers for vid, _ in f.solutions}
+            slots = list(middle_slots())
+            passing = [screened_ids(robot, slot, grasps, world, settings=screen) for slot in slots]
+            for k, slot in enumerate(slots):
+                counts: dict[int, int] = {}
+                for m, ids in enumerate(passing):
+                    if m != k:
+                        for gid in ids:
+                            counts[gid] = counts.get(gid, 0) + 1
+                layers.append(evaluate_slot(robot, slot, grasps, arms, world, settings=screen, prefer=prefer,
+                                            shared=counts, seeds=seeds))
+            stats["feasible"]["middle"] = sum(len(f.solutions) for f in layers[2:])
+            G = build_regrasp_graph(
+                layers, regrasp_penalty=settings.regrasp_penalty, motion_weight=settings.motion_weight
+            )
+            middle_done = True
+            stats["graph_seconds"] += time.perf_counter() - tg
+            if progress:
+                progress(f"{part.name}: no direct grasp; {len(layers) - 2} intermediate placements added")
+            continue
+        stats["graph_nodes"] = G.number_of_nodes() - 2
+        stats["graph_edges"] = G.number_of_edges()
+        if not search.success:
+            reason = search.reason or "no keyframe path"
+            if last_reason is not None:
+                reason += f"; last motion failure: {last_reason}"
+            return TransferResult(False, search=search, graph=G, reason=reason, stats=_rounded(stats),
+                                  keyframes=_why_layers(layers))
+        attempts += 1
+        tm = time.perf_counter()
+        try:
+            steps, q_end, keyframes, min_clear = _realise(
+                robot, planner, part, by_id, G, search, goal, world, q_now, settings
+            )
+        except _MotionFailure as fail:
+            stats["motion_seconds"] += time.perf_counter() - tm
+            banned.append(fail.edge)
+            last_reason = fail.reason
+            if progress:
+                progress(f"{part.name}: {fail.reason}; searching again")
+            if time.perf_counter() - t0 > settings.time_budget:
+                return TransferResult(
+                    False, search=search, graph=G, stats=_rounded(stats),
+                    reason=f"time budget of {settings.time_budget:.0f} s spent after {attempts} keyframe "
+                    f"sequences; last failure: {last_reason}",
+                )
+            continue
+        stats["motion_seconds"] += time.perf_counter() - tm
+        stats.update(regrasps=search.regrasps, attempts=attempts, seconds=time.perf_counter() - t0,
+                     min_clearance_m=min_clear)
+        return TransferResult(True, steps=steps, search=search, graph=G, stats=_rounded(stats), q_end=q_end,
+                              keyframes=keyframes)
+
+
+def _rounded(stats: dict[str, Any]) -> dict[str, Any]:
+    return {k: round(v, 4) if isinstance(v, float) else v for k, v in stats.items()}
+
+
+def _why_layers(layers: Sequence[GraspFeasibility]) -> list[dict[str, Any]]:
+    """Per slot: feasible count and the most common rejection reasons (for failure reports)."""
+    out = []
+    for f in layers:
+        counts: dict[str, int] = {}
+        for r in f.rejected.values():
+            key = r.split("(")[0].strip()
+            counts[key] = counts.get(key, 0) + 1
+        top = sorted(counts.items(), key=lambda kv: -kv[1])[:4]
+        out.append({"slot": f.slot.name, "feasible": len(f.solutions), "rejected": dict(top)})
+    return out
+
+
+class _Checker:
+    """Collision checks of one arm's paths against the robot's current world.
+
+    ``valid`` and ``cost`` answer one configuration and, through ``.batch``,
+    many at once (the robot's checker is ~25x cheaper per configuration in a
+    batch; T-RRT checks whole edges that way).
+    """
+
+    def __init__(self, robot: Robot, arm: str) -> None:
+        self.robot, self.arm = robot, arm
+        self.valid = batched(
+            lambda q: not bool(robot.in_collision(arm, np.asarray(q, float)[None, :])[0]),
+            lambda qs: ~np.asarray(robot.in_collision(arm, qs), bool),
+        )
+        clearance = batched(
+            lambda q: float(robot.clearance(arm, np.asarray(q, float)[None, :])[0]),
+            lambda qs: np.asarray(robot.clearance(arm, qs), float),
+        )
+        # T-RRT climbs this cost map: high within a few mm of obstacles, flat beyond 10 cm (metres).
+        self.cost = inverse_clearance_cost(clearance, floor=0.005, cap=0.10)
+
+    def first_hit(self, path: np.ndarray, ignore: Sequence[str] = ()) -> int | None:
+        hits = self.robot.in_collision(self.arm, np.asarray(path, float), ignore=ignore)
+        return int(np.argmax(hits)) if np.any(hits) else None
+
+
+def _realise(
+    robot: Robot,
+    planner: MotionPlanner,
+    part: PartModel,
+    grasps: dict[int, Grasp],
+    G: nx.Graph,
+    search: KeyframeSearch,
+    goal: PlaceGoal,
+    world: Sequence[Obstacle],
+    q_now: dict[str, np.ndarray],
+    settings: AssemblySettings,
+) -> tuple[list[Step], dict[str, np.ndarray], list[dict[str, Any]], float]:
+    """Keyframes to paths and the least clearance (m) of the free motions; raises
+    :class:`_MotionFailure` with the edge to ban."""
+    nodes = search.nodes
+    steps: list[Step] = []
+    keyframes: list[dict[str, Any]] = []
+    q_cur = {k: np.asarray(v, float).copy() for k, v in q_now.items()}
+    clearances: list[float] = []
+    T_part = G.nodes[nodes[0]]["slot"].T_world_part  # where the part lies now
+    i = 0
+    while i < len(nodes):
+        # one hold: pick at nodes[i], carry (transfer edges) to nodes[j]
+        j = i
+        while j + 1 < len(nodes) and G.edges[nodes[j], nodes[j + 1]]["kind"] == "transfer":
+            j += 1
+        if j == i:  # a lone node followed by a transit edge: the regrasp happens at this slot
+            i += 1
+            continue
+        pick, place = nodes[i], nodes[j]
+        into = START if i == 0 else nodes[i - 1]
+        arm, vid = pick[2], pick[1]
+        slot_pick, slot_place = G.nodes[pick]["slot"], G.nodes[place]["slot"]
+        final = place[0] == goal.slot.name and j == len(nodes) - 1
+        chk = _Checker(robot, arm)
+
+        def plan_free(q_a: np.ndarray, q_b: np.ndarray, edge: tuple[Any, Any], what: str, arm: str = arm) -> np.ndarray:
+            return _free(robot, planner, arm, q_a, q_b, settings, edge, what, clearances)
+
+        # 1. free motion to the pre-grasp pose; the part is an obstacle where it lies
+        T_grasp = slot_pick.T_world_part @ variant_tcp(grasps, vid)
+        robot.attach(arm, None)
+        robot.set_obstacles([o for o in world if o.name != "table"] + [Obstacle(part.name, part.mesh, T_part)])
+        pre = robot.ik(arm, approach_offset(T_grasp, settings.pregrasp_distance), q_seed=G.nodes[pick]["q"])
+        if not pre.success or pre.q is None or getattr(pre, "flipped", False):
+            raise _MotionFailure((into, pick), f"pre-grasp pose at {pick[0]} has no IK solution")
+        steps.append(Step(f"move to pre-grasp {vid} of {part.name} at {pick[0]}", "path", arm,
+                          plan_free(q_cur[arm], pre.q, (into, pick), f"motion to the pre-grasp at {pick[0]}")))
+        keyframes.append({"name": f"pregrasp_{pick[0]}", "arm": arm, "q": np.asarray(pre.q).tolist()})
+        # 2. straight approach without the part as obstacle (the fingers go around it)
+        robot.set_obstacles([o for o in world if o.name != "table"])
+        down = _line(robot, chk, arm, pre.q, T_grasp, settings, (into, pick), f"approach at {pick[0]}")
+        steps.append(Step(f"approach grasp {vid}", "path", arm, down))
+        keyframes.append({"name": f"grasp_{pick[0]}", "arm": arm, "q": down[-1].tolist()})
+        steps.append(Step(f"close on {part.name}", "gripper", arm,
+                          event=GripperEvent(arm=arm, action="close", width=grasps[vid // 2].width,
+                                             attach=part.name)))
+        T_tcp_now = robot.fk(arm, down[-1])
+        robot.attach(arm, part, np.linalg.inv(T_tcp_now) @ slot_pick.T_world_part)
+        # 3. lift straight up (the part leaves the table it touched)
+        T_lift = T_tcp_now.copy()
+        T_lift[2, 3] += settings.lift
+        up = _line(robot, chk, arm, down[-1], T_lift, settings, (pick, nodes[i + 1]), f"lift at {pick[0]}",
+                   ignore=("table",))
+        steps.append(Step(f"lift {part.name}", "path", arm, up))
+        # 4. carry to the start of the final straight move
+        T_place_tcp = slot_place.T_world_part @ variant_tcp(grasps, vid)
+        approach = goal.approach if final else np.array([0.0, 0.0, settings.lift])
+        T_above = T_place_tcp.copy()
+        T_above[:3, 3] += approach
+        above = robot.ik(arm, T_above, q_seed=G.nodes[place]["q"])
+        if not above.success or above.q is None or getattr(above, "flipped", False):
+            raise _MotionFailure((pick, nodes[i + 1]), f"no IK solution above {place[0]}")
+        steps.append(Step(f"carry {part.name} to {place[0]}", "path", arm,
+                          plan_free(up[-1], above.q, (pick, nodes[i + 1]), f"carrying {part.name} to {place[0]}")))
+        keyframes.append({"name": f"{'preassembly' if final and not goal.on_table else 'above'}_{place[0]}",
+                          "arm": arm, "q": np.asarray(above.q).tolist()})
+        # 5. final straight move: place on the table, or insert along v_a
+        touch = goal.touch if final else ("table",)
+        last = _line(robot, chk, arm, above.q, T_place_tcp, settings, (pick, nodes[i + 1]),
+                     f"{'insertion' if final and not goal.on_table else 'placing'} at {place[0]}", ignore=touch)
+        steps.append(Step(f"{'insert' if final and not goal.on_table else 'place'} {part.name} at {place[0]}",
+                          "path", arm, last))
+        keyframes.append({"name": f"placed_{place[0]}", "arm": arm, "q": last[-1].tolist()})
+        # 6. release and back off along the approach axis
+        steps.append(Step(f"release {part.name}", "gripper", arm, event=GripperEvent(arm=arm, action="open")))
+        robot.attach(arm, None)
+        T_part = slot_place.T_world_part
+        back = _line(robot, chk, arm, last[-1],
+                     approach_offset(robot.fk(arm, last[-1]), settings.pregrasp_distance), settings,
+                     (pick, nodes[i + 1]), f"retreat at {place[0]}")
+        steps.append(Step("retreat", "path", arm, back))
+        q_cur[arm] = back[-1]
+        i = j + 1  # the edge after a hold is a transit (regrasp at that slot) or the end
+    # 7. home, with the part now an obstacle where it was placed
+    robot.set_obstacles([o for o in world if o.name != "table"] + [Obstacle(part.name, part.mesh, T_part)])
+    for arm in robot.arms:
+        home = robot.home(arm)
+        if np.allclose(q_cur[arm], home):
+            continue
+        path = _free(robot, planner, arm, q_cur[arm], home, settings, (nodes[-1], GOAL), f"{arm} arm back home",
+                     clearances)
+        steps.append(Step(f"{arm} arm home", "path", arm, path))
+        q_cur[arm] = home
+    return steps, q_cur, keyframes, (min(clearances) if clearances else float("nan"))
+
+
+def _free(
+    robot: Robot,
+    planner: MotionPlanner,
+    arm: str,
+    q_a: np.ndarray,
+    q_b: np.ndarray,
+    settings: AssemblySettings,
+    edge: tuple[Any, Any],
+    what: str,
+    clearances: list[float],
+) -> np.ndarray:
+    """A collision-free joint path from the motion planner, cost = inverse clearance;
+    its minimum clearance (metres) is appended to ``clearances``."""
+    chk = _Checker(robot, arm)
+    lo, hi = robot.joint_limits(arm)
+    res = planner.plan(np.asarray(q_a, float), np.asarray(q_b, float), lower=lo, upper=hi, is_valid=chk.valid,
+                       cost=chk.cost, time_limit=settings.motion_time_limit)
+    if not res.success or res.path is None:
+        raise _MotionFailure(edge, f"{what}: {res.reason}")
+    path = np.asarray(res.path, float)
+    # clearance of the free motion in the world it was planned in, every 0.05 rad (for the statistics)
+    clearances.append(float(np.min(robot.clearance(arm, densify(path, 0.05)))))
+    return path
+
+
+def _line(
+    robot: Robot,
+    chk: _Checker,
+    arm: str,
+    q_from: np.ndarray,
+    T_to: np.ndarray,
+    settings: AssemblySettings,
+    edge: tuple[Any, Any],
+    what: str,
+    ignore: Sequence[str] = (),
+) -> np.ndarray:
+    path, why = cartesian_path(robot, arm, np.asarray(q_from, float), T_to, settings.cartesian_step)
+    if path is None:
+        raise _MotionFailure(edge, f"{what}: {why}")
+    hit = chk.first_hit(path, ignore=ignore)
+    if hit is not None:
+        pairs = robot.collision_report(arm, path[hit])
+        who = ", ".join(f"{a}/{b}" for a, b in pairs[:2]) or "unknown pair"
+        raise _MotionFailure(edge, f"{what}: collision at step {hit} ({who})")
+    return path

@@ -1,0 +1,86 @@
+"""Where the assembly happens: part A's goal on the table, B's assembled and pre-assembly poses.
+
+Part A is put down in one of its stable placements at a chosen spot of the
+table; of the placements, the one that makes B's insertion most nearly
+vertical (``v_a`` pointing down in the world) is preferred, so the
+insertion is a straight move down, with B wholly above the table. B's goal
+is ``T_world_A @ T_A_B``; its pre-assembly pose is that goal moved back
+along ``-v_a`` by the retraction distance (the paper's narrow-passage fix).
+
+Frames: ``T_world_*`` 4x4, metres; ``v_a`` is a unit vector in A's frame
+(the direction B moves *into* the assembly).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from asmteach.core.errors import UserError
+from asmteach.core.geometry import compose, from_rotation, rot_z
+from asmteach.core.interfaces import PartModel
+from asmteach.core.models import AssemblyTask, Placement
+
+__all__ = ["AssemblyGoal", "choose_assembly_goal"]
+
+
+@dataclass(frozen=True)
+class AssemblyGoal:
+    """The assembly's target poses (world frame, metres)."""
+
+    T_world_a: np.ndarray
+    T_world_b: np.ndarray
+    T_world_b_pre: np.ndarray
+    v_world: np.ndarray
+    """Insertion direction in the world (unit)."""
+    placement_id: int
+    """Stable placement of A used at the goal."""
+
+
+def choose_assembly_goal(
+    part_a: PartModel,
+    part_b: PartModel,
+    task: AssemblyTask,
+    placements_a: Sequence[Placement],
+    *,
+    xy: Sequence[float],
+    yaw: float,
+    table_height: float,
+    retract: float,
+) -> AssemblyGoal:
+    """A's goal placement at ``xy`` (metres) turned by ``yaw`` (radians) about the table normal.
+
+    Raises :class:`UserError` when no placement of A keeps the assembled B and
+    its pre-assembly pose above the table.
+    """
+    v_a = np.asarray(task.v_a, float)
+    v_a = v_a / np.linalg.norm(v_a)
+    best: tuple[float, AssemblyGoal] | None = None
+    T_xy = compose(from_rotation(np.eye(3), [xy[0], xy[1], table_height]), rot_z(yaw))
+    for p in placements_a:
+        T_a = T_xy @ p.T_table_part
+        T_b = T_a @ task.T_A_B
+        v_w = T_a[:3, :3] @ v_a
+        T_pre = T_b.copy()
+        T_pre[:3, 3] -= retract * v_w
+        low_b = min(_lowest(part_b, T_b), _lowest(part_b, T_pre))
+        if low_b < table_height - 1e-4:
+            continue
+        # prefer insertion straight down, then the likelier placement
+        key = float(-v_w[2]) + 0.05 * p.probability
+        goal = AssemblyGoal(T_a, T_b, T_pre, v_w, p.id)
+        if best is None or key > best[0]:
+            best = (key, goal)
+    if best is None:
+        raise UserError(
+            f"no stable placement of {part_a.name} keeps {part_b.name} above the table when assembled; "
+            "check T_A_B and v_a of the structure"
+        )
+    return best[1]
+
+
+def _lowest(part: PartModel, T_world_part: np.ndarray) -> float:
+    v = part.mesh.vertices @ T_world_part[:3, :3].T + T_world_part[:3, 3]
+    return float(v[:, 2].min())

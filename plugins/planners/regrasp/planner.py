@@ -1,0 +1,131 @@
+"""Assembly planner plugin ``regrasp``: A to its goal, then B into A.
+
+Part A is picked at its start pose, regrasped through intermediate stable
+placements if needed, and put down at its goal placement (chosen by
+:mod:`asmteach.plugins.planners.regrasp.goals` so that B goes in from above).
+Part B is picked, carried to the pre-assembly pose (retracted along ``-v_a``)
+and inserted along ``v_a`` in a straight line; only then is it released.
+While A moves, B is an obstacle where it lies; while B moves, A is one at its
+goal.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from asmteach.core.interfaces import (
+    AssemblyPlanner,
+    AssemblyProblem,
+    AssemblyResult,
+    MotionPlanner,
+    Obstacle,
+    Robot,
+)
+from asmteach.core.models import Plan
+from asmteach.plugins.planners.placements.planner import compute_placements
+from asmteach.plugins.planners.regrasp.assembly import (
+    AssemblySettings,
+    PlaceGoal,
+    TransferResult,
+    placement_slots,
+    plan_transfer,
+)
+from asmteach.plugins.planners.regrasp.goals import choose_assembly_goal
+from asmteach.plugins.planners.regrasp.graph import PoseSlot
+from asmteach.plugins.planners.regrasp.plan_io import render_regrasp_graph, table_obstacle, to_plan
+
+__all__ = ["RegraspAssemblyPlanner"]
+
+
+class RegraspAssemblyPlanner(AssemblyPlanner):
+    """Three-layer regrasp graph per part, keyframe motions from the configured motion planner."""
+
+    Settings = AssemblySettings
+    settings: AssemblySettings
+
+    def plan(
+        self,
+        problem: AssemblyProblem,
+        robot: Robot,
+        motion_planner: MotionPlanner,
+        *,
+        progress: Callable[[str], None] | None = None,
+    ) -> AssemblyResult:
+        s = self.settings
+        t0 = time.perf_counter()
+        a, b, h = problem.part_a, problem.part_b, problem.table.height
+        goal = choose_assembly_goal(
+            a, b, problem.task, compute_placements(a), xy=s.goal_xy, yaw=s.goal_yaw, table_height=h, retract=s.retract
+        )
+        table = table_obstacle(robot, h)
+        q_home = {arm: robot.home(arm) for arm in robot.arms}
+        details: dict = {"goal_placement_a": goal.placement_id, "v_world": goal.v_world.tolist()}
+        result = AssemblyResult(False, Plan(), T_world_a_goal=goal.T_world_a, T_world_b_goal=goal.T_world_b,
+                                details=details)
+
+        # Part A: B lies where it was detected and is in the way.
+        world_a = [table, Obstacle(b.name, b.mesh, problem.T_world_b)]
+        start_a = problem.T_world_a[:3, 3]
+        res_a = plan_transfer(
+            robot, motion_planner, a, problem.grasps_a,
+            T_start=problem.T_world_a,
+            goal=PlaceGoal(PoseSlot("goal", "goal", goal.T_world_a), np.array([0.0, 0.0, s.lift])),
+            middle_slots=lambda: placement_slots(compute_placements(a), start_a[:2], h, s),
+            world=world_a, q_now=q_home, settings=s, progress=progress,
+        )
+        details["a"] = res_a
+        if not res_a.success:
+            return self._fail(result, res_a, f"part A ({a.name})", t0, robot)
+        # Part B: A stands at its goal; B may touch A (and the table) on the insertion only.
+        world_b = [table, Obstacle(a.name, a.mesh, goal.T_world_a)]
+        start_b = problem.T_world_b[:3, 3]
+        res_b = plan_transfer(
+            robot, motion_planner, b, problem.grasps_b,
+            T_start=problem.T_world_b,
+            goal=PlaceGoal(PoseSlot("assembled", "goal", goal.T_world_b), -s.retract * goal.v_world,
+                           touch=(a.name, "table"), on_table=False),
+            middle_slots=lambda: placement_slots(compute_placements(b), start_b[:2], h, s),
+            world=world_b, q_now=res_a.q_end, settings=s, progress=progress,
+        )
+        details["b"] = res_b
+        if not res_b.success:
+            result.plan = self._timed(robot, res_a, None, t0)
+            return self._fail(result, res_b, f"part B ({b.name})", t0, robot, keep_plan=True)
+        result.plan = self._timed(robot, res_a, res_b, t0)
+        result.success = True
+        return result
+
+    def _timed(self, robot: Robot, res_a: TransferResult, res_b: TransferResult | None, t0: float) -> Plan:
+        steps = list(res_a.steps) + (list(res_b.steps) if res_b is not None else [])
+        keyframes = [dict(k, part="A") for k in res_a.keyframes]
+        if res_b is not None:
+            keyframes += [dict(k, part="B") for k in res_b.keyframes]
+        stats = {"A": res_a.stats, "B": res_b.stats if res_b is not None else None,
+                 "planning_seconds": round(time.perf_counter() - t0, 3)}
+        return to_plan(steps, robot, self.settings.acceleration, keyframes=keyframes, stats=stats)
+
+    def _fail(self, result: AssemblyResult, res: TransferResult, who: str, t0: float, robot: Robot,
+              keep_plan: bool = False) -> AssemblyResult:
+        result.reason = f"{who}: {res.reason}"
+        result.failed_at = who
+        if not keep_plan:
+            result.plan = Plan(stats={"planning_seconds": round(time.perf_counter() - t0, 3)})
+        result.details["why_layers"] = res.keyframes
+        return result
+
+    def write_figures(self, result: AssemblyResult, out_dir: Path) -> dict[str, Path]:
+        """``regrasp_graph_A.png`` / ``_B.png``: each part's graph with the chosen keyframes highlighted."""
+        out: dict[str, Path] = {}
+        for key in ("a", "b"):
+            res = result.details.get(key)
+            if isinstance(res, TransferResult) and res.graph is not None:
+                path = Path(out_dir) / f"regrasp_graph_{key.upper()}.png"
+                out[f"regrasp_graph_{key.upper()}"] = render_regrasp_graph(
+                    res.graph, res.search.nodes if res.search is not None and res.search.success else [], path,
+                    title=f"regrasp graph of part {key.upper()}",
+                )
+        return out

@@ -1,0 +1,76 @@
+"""`asmteach run`: bad input is one line with exit 2; a whole simulated run writes its report."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from asmteach.core.cli import main
+from asmteach.core.parts import build_part, load_structure
+from asmteach.core.scene import SceneSettings, random_start_poses
+
+ROOT = Path(__file__).resolve().parents[2]
+STRUCTURE = ROOT / "configs/parts/set1/peg_in_hole.yaml"
+
+
+def _config(tmp_path: Path, **extra) -> Path:
+    cfg = {"name": "t", "seed": 3, "structure": str(STRUCTURE), **extra}
+    path = tmp_path / "run.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    return path
+
+
+def test_bad_execution_key_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    cfg = _config(tmp_path, execution={"animaton": False})
+    assert main(["run", str(cfg), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "execution.animaton" in err[0]
+
+
+def test_bad_override_is_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["run", str(_config(tmp_path)), "--out", str(tmp_path / "o"), "--set", "seed"]) == 2
+    assert "KEY=VALUE" in capsys.readouterr().err
+
+
+def test_random_start_poses_rest_on_the_table_apart_and_are_seeded() -> None:
+    task = load_structure(STRUCTURE)
+    parts = [build_part(task.part_a), build_part(task.part_b)]
+    s = SceneSettings()
+    Ts = random_start_poses(parts, 0.2, s, np.random.default_rng(5))
+    again = random_start_poses(parts, 0.2, s, np.random.default_rng(5))
+    for T, T2, part in zip(Ts, again, parts, strict=True):
+        np.testing.assert_array_equal(T, T2)
+        low = (part.mesh.vertices @ T[:3, :3].T + T[:3, 3])[:, 2].min()
+        assert low == pytest.approx(0.2, abs=1e-9)
+        assert s.x_range[0] <= T[0, 3] <= s.x_range[1] + 0.05
+    assert np.sign(Ts[0][1, 3]) == -np.sign(Ts[1][1, 3])
+
+
+@pytest.mark.slow
+def test_whole_run_goes_through_every_stage_and_writes_its_report(tmp_path: Path) -> None:
+    """Teach -> spawn -> detect -> grasps -> plan -> execute -> measure on the simulated Nextage.
+
+    Whether the parts end assembled is measured (metrics, exit code) but not
+    asserted here: the end-to-end success rate is an experiment, not a unit test.
+    """
+    cfg = _config(tmp_path, motion_planner={"plugin": "trrt"},
+                  robot={"plugin": "nextage_pybullet", "settings": {"ik": {"max_starts": 4}, "start_tolerance": 0.06}},
+                  execution={"animation_fps": 1.0})
+    out = tmp_path / "out"
+    code = main(["run", str(cfg), "--out", str(out)])
+    report = json.loads((out / "report.json").read_text())
+    stages = {s["stage"]: s for s in report["stages"]}
+    for name in ("teach", "spawn", "detect", "grasps", "plan", "execute"):
+        assert stages[name]["ok"], (name, stages[name]["reason"])
+    assert "measure" in stages
+    assert code == (0 if report["success"] else 1)
+    m = report["metrics"]
+    assert m["teach_position_mm"] < 1.0 and m["teach_angle_deg"] < 1.0
+    assert all(m[f"detect_{p}_surface_mm"] < 3.0 for p in ("holed_block", "round_peg"))
+    assert m["a_goal_error_mm"] < 5.0  # A was carried to its goal
+    html = (out / "report.html").read_text()
+    assert "data:image/png;base64" in html and "http://" not in html and "https://" not in html
+    for name in ("task.json", "plan.json", "detection.png", "execution.gif", "regrasp_graph_A.png"):
+        assert (out / name).is_file(), name

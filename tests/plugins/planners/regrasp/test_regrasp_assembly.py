@@ -1,0 +1,94 @@
+"""Assembly planning on the real Nextage model: goals, placement slots, a whole two-part plan."""
+
+import numpy as np
+import pytest
+
+from asmteach.core import geometry, registry
+from asmteach.core.geometry import compose, from_rpy, rot_z
+from asmteach.core.interfaces import AssemblyProblem
+from asmteach.core.models import TablePlane
+from asmteach.core.parts import build_part, load_structure
+from asmteach.plugins.planners.motion.interpolate import densify
+from asmteach.plugins.planners.placements.planner import compute_placements
+from asmteach.plugins.planners.regrasp.assembly import AssemblySettings, placement_slots
+from asmteach.plugins.planners.regrasp.goals import choose_assembly_goal
+
+STRUCTURE = "configs/parts/set1/peg_in_hole.yaml"
+
+
+@pytest.fixture(scope="module")
+def peg():
+    task = load_structure(STRUCTURE)
+    return task, build_part(task.part_a), build_part(task.part_b)
+
+
+def test_goal_makes_the_insertion_vertical_and_keeps_b_above_the_table(peg) -> None:
+    task, a, b = peg
+    goal = choose_assembly_goal(a, b, task, compute_placements(a), xy=(0.4, 0.0), yaw=0.3, table_height=0.1,
+                                retract=0.05)
+    np.testing.assert_allclose(goal.v_world, [0.0, 0.0, -1.0], atol=1e-9)
+    np.testing.assert_allclose(goal.T_world_b, goal.T_world_a @ task.T_A_B, atol=1e-12)
+    # pre-assembly: 50 mm back along -v_a, i.e. straight up
+    np.testing.assert_allclose(goal.T_world_b_pre[:3, 3] - goal.T_world_b[:3, 3], [0, 0, 0.05], atol=1e-12)
+    low_a = geometry.transform_points(goal.T_world_a, a.mesh.vertices)[:, 2].min()
+    assert low_a == pytest.approx(0.1, abs=1e-9)
+
+
+def test_placement_slots_skip_placements_equal_under_the_parts_symmetry(peg) -> None:
+    _, _, b = peg
+    placements = compute_placements(b)  # square head: four lying placements are one
+    slots = placement_slots(placements, (0.3, 0.2), 0.0, AssemblySettings(max_placements=10, placement_yaws=2))
+    names = {s.name.split("_yaw")[0] for s in slots}
+    assert len(placements) == 6 and len(names) == 3
+    assert len(slots) == 6
+    for s in slots:
+        low = geometry.transform_points(s.T_world_part, b.mesh.vertices)[:, 2].min()
+        assert low == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.slow
+def test_peg_in_hole_plan_is_collision_free_and_ends_assembled(peg) -> None:
+    task, a, b = peg
+    robot = registry.create("robots", "nextage_pybullet", {"ik": {"max_starts": 4}}, seed=0)
+    grasp_planner = registry.create("grasp_planners", "antipodal", {}, seed=0)
+    motion = registry.create("motion_planners", "rrtconnect", {}, seed=0)
+    planner = registry.create("assembly_planners", "regrasp", {}, seed=0)
+    pa, pb = compute_placements(a), compute_placements(b)
+    T_a = compose(from_rpy(0, 0, 0, t=[0.33, 0.22, 0.0]), rot_z(0.5), pa[0].T_table_part)
+    # B standing on its shank: a grasp of the head serves both the pick and the insertion
+    upright = next(p for p in pb if p.T_table_part[2, 2] > 0.99)
+    T_b = compose(from_rpy(0, 0, 0, t=[0.36, -0.22, 0.0]), rot_z(-0.3), upright.T_table_part)
+    problem = AssemblyProblem(a, b, task, T_a, T_b, grasp_planner.plan(a, robot.hand),
+                              grasp_planner.plan(b, robot.hand), TablePlane(height=0.0))
+    res = planner.plan(problem, robot, motion)
+    assert res.success, res.reason
+    plan = res.plan
+    closes = [s.gripper for s in plan.segments if s.gripper is not None and s.gripper.action == "close"]
+    assert closes[0].attach == a.name and closes[-1].attach == b.name
+    # every trajectory: within joint limits, starts where the previous one of its arm ended
+    last: dict[str, np.ndarray] = {arm: robot.home(arm) for arm in robot.arms}
+    for seg in plan.segments:
+        if seg.trajectory is None:
+            continue
+        tr = seg.trajectory
+        lo, hi = robot.joint_limits(tr.arm)
+        q = np.asarray(tr.positions)
+        assert np.all(q >= lo - 1e-9) and np.all(q <= hi + 1e-9)
+        np.testing.assert_allclose(q[0], last[tr.arm], atol=1e-6, err_msg=seg.label)
+        last[tr.arm] = q[-1]
+    # where B is released, its TCP holds it at the assembled pose
+    insert = next(s for s in plan.segments if s.label.startswith("insert"))
+    T_tcp = robot.fk(insert.trajectory.arm, np.asarray(insert.trajectory.positions)[-1])
+    T_b_goal = res.T_world_b_goal
+    grasp_at_goal = np.linalg.inv(T_b_goal) @ T_tcp  # constant part->tcp offset of the grasp used
+    assert np.linalg.norm(grasp_at_goal[:3, 3]) < 0.1
+    np.testing.assert_allclose(T_b_goal, res.T_world_a_goal @ task.T_A_B, atol=1e-9)
+    # free motions re-checked densely against the world with no part held (home moves at the end)
+    robot.set_obstacles([])
+    robot.attach("left", None)
+    home_moves = [s for s in plan.segments if s.label.endswith("home") and s.trajectory is not None]
+    assert home_moves
+    for seg in home_moves:
+        dense = densify(np.asarray(seg.trajectory.positions), 0.01)
+        assert not robot.in_collision(seg.trajectory.arm, dense).any()
+    robot.close()
