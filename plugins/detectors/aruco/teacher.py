@@ -30,15 +30,9 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Teacher
 from asmteach.core.models import AssemblyTask, CameraIntrinsics, StrictModel, TeachingEvidence
 from asmteach.core.parts import build_part
-from asmteach.plugins.detectors.aruco.approach import refit_with_rotation
 from asmteach.plugins.detectors.aruco.detect import MarkerDetector, RefineMethod
 from asmteach.plugins.detectors.aruco.fusion import fuse_poses
-from asmteach.plugins.detectors.aruco.insertion import (
-    check_retreat,
-    direction_from_approach,
-    free_cone_centre,
-    separation_direction,
-)
+from asmteach.plugins.detectors.aruco.insertion import check_retreat, direction_from_approach, separation_direction
 from asmteach.plugins.detectors.aruco.markers import MarkerRef, marker_table
 from asmteach.plugins.detectors.aruco.pnp import MarkerObservation, PartPose, solve_part_pose
 
@@ -60,8 +54,6 @@ class ArucoTeacherSettings(StrictModel):
     min_approach_travel: float = Field(0.01, gt=0, description="B must travel this far toward A to learn v_a")
     check_insertion: bool = Field(True, description="check v_a with python-fcl; fall back to geometry if it fails")
     retract: float = Field(0.5, gt=0, description="retreat distance of the check along -v_a, metres")
-    snap_cone_deg: float = Field(6.0, gt=0, le=30, description="a learned v_a failing the check moves to the free "
-                                 "retreat directions within this cone, degrees")
     collision_tolerance: float = Field(5e-4, ge=0, description="meshes shrunk by this for contact checks, metres")
     threads: int | None = Field(None, ge=1, description="detection threads (default: all cores)")
 
@@ -176,28 +168,25 @@ class ArucoTeacher(Teacher):
         if s.joint_refine and len(used) >= 2:
             T_A_B, jnote = self._joint_refine(used, T_A_B, camera)
             notes.append(jnote)
-        # Insertion direction from the approach (frames before the assembled ones), each frame refitted with
-        # B's rotation in A held at the taught one (:mod:`.approach`).
+        # Insertion direction from the approach (frames before the assembled ones).
         first_used = min(r.index for r in used)
-        K, dist = camera.K, camera.dist_array
-        approach = []
-        for r in results:
-            if r.pose_a is None or r.pose_b is None or r.index >= first_used:
-                continue
-            pt = refit_with_rotation(r.index, r.pose_a, r.obs_a, r.pose_b, r.obs_b, T_A_B[:3, :3], K, dist)
-            if pt.rms_px <= s.frame_reject_px and np.linalg.norm(pt.position - T_A_B[:3, 3]) > s.assembled_radius:
-                approach.append(pt)
+        approach = [
+            r for r in results
+            if r.T_A_B is not None and r.index < first_used and r.rms_px <= s.frame_reject_px
+            and geometry.rotation_distance(r.T_A_B, T_A_B) < np.radians(10.0)
+            and geometry.translation_distance(r.T_A_B, T_A_B) > s.assembled_radius
+        ]
         v_a: np.ndarray | None = None
         source = "geometric"
         if len(approach) >= s.min_approach_frames:
-            pos = np.array([p.position for p in approach])
+            pos = np.array([r.T_A_B[:3, 3] for r in approach])
             travel = float(np.max(np.linalg.norm(pos - T_A_B[:3, 3], axis=1)))
             if travel >= s.min_approach_travel:
                 v_a, lateral, n_kept = direction_from_approach(pos, T_A_B[:3, 3])
                 source = "demonstration"
                 notes.append(
-                    f"v_a from {n_kept} of {len(approach)} approach frame(s) (B's rotation in A held at the taught "
-                    f"one): travel {travel * 1000:.1f} mm, lateral rms {lateral * 1000:.2f} mm"
+                    f"v_a from {n_kept} of {len(approach)} approach frame(s): travel {travel * 1000:.1f} mm, "
+                    f"lateral rms {lateral * 1000:.2f} mm"
                 )
             else:
                 notes.append(f"approach travel {travel * 1000:.1f} mm is too short to learn v_a")
@@ -213,25 +202,15 @@ class ArucoTeacher(Teacher):
             else:
                 notes.append(
                     f"learned v_a {np.round(v_a, 3).tolist()} fails the retreat check (collision at "
-                    f"{(chk.first_collision or s.retract) * 1000:.1f} mm)"
+                    f"{(chk.first_collision or s.retract) * 1000:.1f} mm); trying the geometric direction"
                 )
-                cone = free_cone_centre(*meshes, T_A_B, v_a, cone_deg=s.snap_cone_deg, retract=s.retract,
-                                        tolerance=s.collision_tolerance)
-                if cone is not None:
-                    moved = float(np.degrees(np.arccos(np.clip(np.dot(cone[0], v_a), -1.0, 1.0))))
-                    v_a = cone[0]
-                    notes.append(f"v_a moved {moved:.2f} deg to the centre of the {cone[1]} free retreat direction(s) "
-                                 f"within {s.snap_cone_deg:g} deg of the demonstrated one (python-fcl)")
-                else:
-                    notes.append(f"no free retreat within {s.snap_cone_deg:g} deg; trying the geometric direction")
-                    try:
-                        v_a, travel = separation_direction(*meshes, T_A_B, tolerance=s.collision_tolerance)
-                        source = "geometric"
-                        notes.append(
-                            f"v_a from geometry: least-travel free retreat ({travel * 1000:.0f} mm to clear A)")
-                    except ValueError:
-                        # The taught pose itself interpenetrates beyond the tolerance: keep what was demonstrated.
-                        notes.append("no straight free retreat from the taught pose; keeping the demonstrated v_a")
+                try:
+                    v_a, travel = separation_direction(*meshes, T_A_B, tolerance=s.collision_tolerance)
+                    source = "geometric"
+                    notes.append(f"v_a from geometry: least-travel free retreat ({travel * 1000:.0f} mm to clear A)")
+                except ValueError:
+                    # The taught pose itself interpenetrates beyond the tolerance: keep what was demonstrated.
+                    notes.append("no straight free retreat from the taught pose; keeping the demonstrated v_a")
         if v_a is None:
             assert meshes is not None
             try:
@@ -312,24 +291,7 @@ class ArucoTeacher(Teacher):
         def unpack(x: np.ndarray) -> np.ndarray:
             return geometry.from_rotation(cv2.Rodrigues(x[:3].reshape(3, 1))[0], x[3:6])
 
-        def frame_res(T_cam_A: np.ndarray, i: int) -> np.ndarray:
-            obj_a, img_a, obj_b, img_b = data[i]
-            T_cam_B = T_cam_A @ T_A_B
-            pa = cv2.projectPoints(obj_a, cv2.Rodrigues(np.ascontiguousarray(T_cam_A[:3, :3]))[0], T_cam_A[:3, 3],
-                                   K, dist)[0]
-            pb = cv2.projectPoints(obj_b, cv2.Rodrigues(np.ascontiguousarray(T_cam_B[:3, :3]))[0], T_cam_B[:3, 3],
-                                   K, dist)[0]
-            return np.concatenate([(pa.reshape(-1, 2) - img_a).ravel(), (pb.reshape(-1, 2) - img_b).ravel()])
-
-        # Each frame's start: A's own pose or B's pose carried to A through the fused T_A_B, whichever fits both
-        # parts' corners best. A single square marker's pose can be tilted by degrees (or flipped) while the
-        # other part's is not; starting from it leaves the joint problem in a poor local minimum.
-        starts = []
-        for i, r in enumerate(frames):
-            cands = [r.pose_a.T_cam_part] + [T for T, _ in r.pose_a.alternatives]
-            cands += [T @ geometry.invert(T_A_B) for T in [r.pose_b.T_cam_part] + [T for T, _ in r.pose_b.alternatives]]
-            starts.append(min(cands, key=lambda T, i=i: float(np.sum(frame_res(T, i) ** 2))))
-        x0 = np.concatenate([pack(T_A_B)] + [pack(T) for T in starts])
+        x0 = np.concatenate([pack(T_A_B)] + [pack(r.pose_a.T_cam_part) for r in frames])
         sizes = [2 * (len(d[1]) + len(d[3])) for d in data]
 
         def residuals(x: np.ndarray) -> np.ndarray:
@@ -352,7 +314,7 @@ class ArucoTeacher(Teacher):
             row += sz
         r0 = residuals(x0)
         sol = least_squares(residuals, x0, jac_sparsity=sparsity, loss="huber", f_scale=0.5, x_scale="jac",
-                            method="trf", max_nfev=200)
+                            method="trf", max_nfev=50)
         T = unpack(sol.x[:6])
         rms0 = float(np.sqrt(np.mean(r0**2) * 2))
         rms1 = float(np.sqrt(np.mean(sol.fun**2) * 2))
