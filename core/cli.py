@@ -66,6 +66,8 @@ def _cmd_library(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    import yaml
+
     from asmteach.core.config import load_run_config
     from asmteach.core.pipeline import run_pipeline
 
@@ -74,8 +76,6 @@ def _cmd_run(args: argparse.Namespace) -> int:
         key, sep, value = item.partition("=")
         if not sep or not key:
             raise UserError(f"--set {item!r}: write KEY=VALUE, e.g. --set seed=3")
-        import yaml
-
         overrides[key.strip()] = yaml.safe_load(value)
     cfg = load_run_config(args.config, overrides=overrides or None)
     out = Path(args.out)

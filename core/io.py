@@ -25,6 +25,7 @@ __all__ = [
     "atomic_path",
     "read_jsonl",
     "read_yaml",
+    "to_jsonable",
     "write_bytes",
     "write_json",
     "write_model",
@@ -68,6 +69,19 @@ def write_bytes(path: str | os.PathLike[str], data: bytes) -> Path:
 def write_text(path: str | os.PathLike[str], text: str) -> Path:
     """Write UTF-8 text atomically; returns the path."""
     return write_bytes(path, text.encode("utf-8"))
+
+
+def to_jsonable(obj: Any) -> Any:
+    """``obj`` with numpy arrays and scalars as lists and numbers, keys as strings, anything else as ``str``."""
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, (str, int, float, bool)) or obj is None:
+        return obj
+    if hasattr(obj, "tolist"):  # numpy arrays and scalars
+        return to_jsonable(obj.tolist())
+    return str(obj)
 
 
 def write_json(path: str | os.PathLike[str], obj: Any) -> Path:

@@ -26,12 +26,12 @@ from asmteach.core import geometry, registry
 from asmteach.core.config import ROLE_OF_KEY, RunConfig, format_validation_error, validate_settings
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import AssemblyProblem, PartModel, Robot
-from asmteach.core.io import write_json, write_model
+from asmteach.core.io import to_jsonable, write_json, write_model
 from asmteach.core.models import AssemblyTask, Detection, Plan, RunReport, StageOutcome, StrictModel, TablePlane
 from asmteach.core.parts import build_part, load_structure
 from asmteach.core.scene import SceneSettings, random_start_poses
 
-__all__ = ["ExecutionSettings", "StageFailed", "assembly_errors", "run_pipeline"]
+__all__ = ["ExecutionSettings", "StageFailed", "pose_error", "run_pipeline"]
 
 
 class ExecutionSettings(StrictModel):
@@ -62,11 +62,6 @@ def pose_error(T_est: np.ndarray, T_true: np.ndarray) -> dict[str, float]:
     }
 
 
-def assembly_errors(T_A_B_achieved: np.ndarray, T_A_B_ref: np.ndarray) -> dict[str, float]:
-    """Error of an achieved B-in-A pose against a reference, in A's frame (mm, deg)."""
-    return pose_error(T_A_B_achieved, T_A_B_ref)
-
-
 def symmetric_surface_error(part: PartModel, T_est: np.ndarray, T_true: np.ndarray, n: int = 500) -> float:
     """Mean distance (mm) from the part's surface at ``T_est`` to its surface at ``T_true`` (ADD-S).
 
@@ -75,9 +70,7 @@ def symmetric_surface_error(part: PartModel, T_est: np.ndarray, T_true: np.ndarr
     """
     from scipy.spatial import cKDTree
 
-    pts = part.mesh.sample(n, return_index=False) if len(part.mesh.vertices) < n else part.mesh.vertices
-    pts = np.asarray(pts, float)[:n] if len(pts) > n else np.asarray(pts, float)
-    a = geometry.transform_points(T_est, pts)
+    a = geometry.transform_points(T_est, np.asarray(part.mesh.sample(n, return_index=False), float))
     b = geometry.transform_points(T_true, np.asarray(part.mesh.sample(4000, return_index=False), float))
     d, _ = cKDTree(b).query(a)
     return float(1000.0 * d.mean())
@@ -126,29 +119,15 @@ class _Run:
             if isinstance(exc, StageFailed):
                 details.update(exc.details)
             self.report.stages.append(StageOutcome(stage=name, ok=False, seconds=round(seconds, 3), reason=reason,
-                                                   details=_jsonable(details)))
+                                                   details=to_jsonable(details)))
             self.report.failed_stage, self.report.reason = name, reason
             self.hook("asmteach_stage_finished", stage=name, ok=False, seconds=seconds, summary={"reason": reason})
             raise StageFailed(reason) from None
         seconds = time.perf_counter() - t0
         self.report.stages.append(StageOutcome(stage=name, ok=True, seconds=round(seconds, 3),
-                                               details=_jsonable(details)))
+                                               details=to_jsonable(details)))
         self.hook("asmteach_stage_finished", stage=name, ok=True, seconds=seconds,
                   summary={k: v for k, v in details.items() if isinstance(v, (int, float, str))})
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, (np.floating, np.integer)):
-        return obj.item()
-    if isinstance(obj, (str, int, float, bool)) or obj is None:
-        return obj
-    return str(obj)
 
 
 def run_pipeline(cfg: RunConfig, out_dir: Path, *, pm: Any | None = None) -> RunReport:
@@ -193,7 +172,7 @@ def _teach(run: _Run, true_task: AssemblyTask) -> AssemblyTask:
         frames, camera = teacher.demonstrate(true_task, run.cfg.demo, camera_file, run.out / "demonstration")
         d["frames"] = len(frames)
         learned = teacher.teach(frames, camera, true_task)
-        err = assembly_errors(learned.T_A_B, true_task.T_A_B)
+        err = pose_error(learned.T_A_B, true_task.T_A_B)
         v_true = np.asarray(true_task.v_a, float)
         v_err = float(np.degrees(np.arccos(np.clip(np.dot(learned.v_a, v_true) / np.linalg.norm(v_true), -1, 1))))
         d.update(T_A_B_error_mm=round(err["position_mm"], 4), T_A_B_error_deg=round(err["angle_deg"], 4),
@@ -296,7 +275,7 @@ def _plan(run: _Run, robot: Robot, task: AssemblyTask, a: PartModel, b: PartMode
         result = planner.plan(problem, robot, motion, progress=run.progress("plan"))
         for name, path in planner.write_figures(result, run.out).items():
             run.artefact(name, path, "png")
-        run.report.plan_stats = _jsonable(result.plan.stats)
+        run.report.plan_stats = to_jsonable(result.plan.stats)
         d.update(segments=len(result.plan.segments),
                  planning_seconds=result.plan.stats.get("planning_seconds"),
                  execution_seconds=result.plan.stats.get("execution_seconds"))
@@ -314,7 +293,6 @@ def _execute(run: _Run, robot: Robot, plan: Plan) -> list[np.ndarray]:
         period = 1.0 / run.execution.animation_fps
         if record:
             frames.append(robot.sense_rgb())
-        held_failures = []
         for seg in plan.segments:
             if seg.trajectory is not None:
                 for chunk in _chunks(seg.trajectory, period if record else None):
@@ -324,7 +302,6 @@ def _execute(run: _Run, robot: Robot, plan: Plan) -> list[np.ndarray]:
             elif seg.gripper is not None:
                 ok = robot.grip(seg.gripper.arm, seg.gripper.action == "close", seg.gripper.attach)
                 if seg.gripper.action == "close" and not ok:
-                    held_failures.append(seg.label)
                     raise StageFailed(f"{seg.label}: the fingers did not close on the part")
             run.hook("asmteach_stage_progress", stage="execute", advance=1, message=seg.label)
         d["segments"] = len(plan.segments)
@@ -360,8 +337,8 @@ def _measure(run: _Run, robot: Robot, learned: AssemblyTask, true_task: Assembly
     with run.stage("measure") as d:
         T_a, T_b = robot.part_pose(a.name), robot.part_pose(b.name)
         T_A_B = geometry.invert(T_a) @ T_b
-        vs_taught = assembly_errors(T_A_B, learned.T_A_B)
-        vs_true = assembly_errors(T_A_B, true_task.T_A_B)
+        vs_taught = pose_error(T_A_B, learned.T_A_B)
+        vs_true = pose_error(T_A_B, true_task.T_A_B)
         a_goal_mm = 1000.0 * geometry.translation_distance(T_a, result.T_world_a_goal)
         ex = run.execution
         ok = (vs_taught["position_mm"] <= ex.success_position_mm and vs_taught["angle_deg"] <= ex.success_angle_deg

@@ -52,7 +52,7 @@ from pydantic import Field, ValidationError
 
 from asmteach.core.config import format_validation_error, set_dotted
 from asmteach.core.errors import UserError
-from asmteach.core.io import append_jsonl, atomic_path, read_jsonl, read_yaml, write_json, write_text
+from asmteach.core.io import append_jsonl, atomic_path, read_jsonl, read_yaml, to_jsonable, write_json, write_text
 from asmteach.core.models import StrictModel, resolve_relative
 from asmteach.core.registry import closest
 
@@ -213,17 +213,13 @@ def _run_one(kind_name: str, base_dir: str, exp_json: str, trial_json: str, out_
         workdir = Path(out_dir) / "trials" / trial.trial_id
         workdir.mkdir(parents=True, exist_ok=True)
         metrics = kind(Path(base_dir)).run_trial(params, trial.seed, workdir)
-        row.update(ok=True, metrics=_jsonable(metrics), error=None)
+        row.update(ok=True, metrics=to_jsonable(metrics), error=None)
     except UserError as exc:
         row.update(ok=False, metrics={}, error=str(exc))
     except Exception as exc:  # noqa: BLE001 - a failed trial is a result, recorded with its reason
         row.update(ok=False, metrics={}, error=f"{type(exc).__name__}: {exc}", traceback=traceback.format_exc(limit=8))
     row["seconds"] = round(time.perf_counter() - t0, 4)
     return row
-
-
-def _jsonable(obj: Any) -> Any:
-    return json.loads(json.dumps(obj, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
 
 
 def run_sweep(

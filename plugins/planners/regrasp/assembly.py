@@ -18,6 +18,7 @@ Frames: ``T_world_*`` 4x4 in metres; joint paths in radians.
 from __future__ import annotations
 
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
@@ -36,8 +37,9 @@ from asmteach.plugins.planners.regrasp.feasibility import (
     ScreenSettings,
     approach_offset,
     evaluate_slot,
-    screened_ids,
+    screen_slot,
     variant_tcp,
+    world_collider,
 )
 from asmteach.plugins.planners.regrasp.graph import (
     GOAL,
@@ -212,12 +214,18 @@ def plan_transfer(
         pregrasp_distance=settings.pregrasp_distance,
     )
     seeds = {k: np.asarray(v, float).copy() for k, v in q_now.items()}
+    collider = world_collider(world)
+
+    def evaluate(slot: PoseSlot, on_table: bool = True, **kwargs: Any) -> GraspFeasibility:
+        screened = screen_slot(slot, grasps, collider, robot.hand, screen, on_table)
+        return evaluate_slot(robot, slot, screened, arms, settings=screen, seeds=seeds, **kwargs)
+
+    _set_world(robot, world)
+    for arm in arms:
+        robot.attach(arm, None)
     start_slot = PoseSlot("start", "start", np.asarray(T_start, float))
-    start = evaluate_slot(robot, start_slot, grasps, arms, world, settings=screen, seeds=seeds)
-    shared = {vid // 2 for vid, _ in start.solutions}
-    end = evaluate_slot(
-        robot, goal.slot, grasps, arms, world, settings=screen, on_table=goal.on_table, prefer=shared, seeds=seeds
-    )
+    start = evaluate(start_slot)
+    end = evaluate(goal.slot, goal.on_table, prefer={vid // 2 for vid, _ in start.solutions})
     layers: list[GraspFeasibility] = [start, end]
     stats: dict[str, Any] = {"feasible": {"start": len(start.solutions), "goal": len(end.solutions)}}
     G = build_regrasp_graph(layers, regrasp_penalty=settings.regrasp_penalty, motion_weight=settings.motion_weight)
@@ -236,14 +244,15 @@ def plan_transfer(
             tg = time.perf_counter()
             prefer = {vid // 2 for f in layers for vid, _ in f.solutions}
             slots = list(middle_slots())
-            passing = [screened_ids(robot, slot, grasps, world, settings=screen) for slot in slots]
-            for k, slot in enumerate(slots):
-                counts: dict[int, int] = {}
-                for m, ids in enumerate(passing):
-                    if m != k:
-                        for gid in ids:
-                            counts[gid] = counts.get(gid, 0) + 1
-                layers.append(evaluate_slot(robot, slot, grasps, arms, world, settings=screen, prefer=prefer,
+            screens = [screen_slot(slot, grasps, collider, robot.hand, screen) for slot in slots]
+            total = Counter(g.id for passed, _ in screens for g in passed)
+            _set_world(robot, world)  # a failed realisation may have left other obstacles or a held part
+            for arm in arms:
+                robot.attach(arm, None)
+            for slot, screened in zip(slots, screens, strict=True):
+                own = {g.id for g in screened[0]}
+                counts = {gid: n - (gid in own) for gid, n in total.items()}  # other slots passing it
+                layers.append(evaluate_slot(robot, slot, screened, arms, settings=screen, prefer=prefer,
                                             shared=counts, seeds=seeds))
             stats["feasible"]["middle"] = sum(len(f.solutions) for f in layers[2:])
             G = build_regrasp_graph(
@@ -286,6 +295,11 @@ def plan_transfer(
                      min_clearance_m=min_clear)
         return TransferResult(True, steps=steps, search=search, graph=G, stats=_rounded(stats), q_end=q_end,
                               keyframes=keyframes)
+
+
+def _set_world(robot: Robot, world: Sequence[Obstacle], *extra: Obstacle) -> None:
+    """The robot's obstacles: ``world`` and ``extra`` without the table, which the robot models itself."""
+    robot.set_obstacles([o for o in world if o.name != "table"] + list(extra))
 
 
 def _rounded(stats: dict[str, Any]) -> dict[str, Any]:
@@ -373,7 +387,7 @@ def _realise(
         # 1. free motion to the pre-grasp pose; the part is an obstacle where it lies
         T_grasp = slot_pick.T_world_part @ variant_tcp(grasps, vid)
         robot.attach(arm, None)
-        robot.set_obstacles([o for o in world if o.name != "table"] + [Obstacle(part.name, part.mesh, T_part)])
+        _set_world(robot, world, Obstacle(part.name, part.mesh, T_part))
         pre = robot.ik(arm, approach_offset(T_grasp, settings.pregrasp_distance), q_seed=G.nodes[pick]["q"])
         if not pre.success or pre.q is None or getattr(pre, "flipped", False):
             raise _MotionFailure((into, pick), f"pre-grasp pose at {pick[0]} has no IK solution")
@@ -381,7 +395,7 @@ def _realise(
                           plan_free(q_cur[arm], pre.q, (into, pick), f"motion to the pre-grasp at {pick[0]}")))
         keyframes.append({"name": f"pregrasp_{pick[0]}", "arm": arm, "q": np.asarray(pre.q).tolist()})
         # 2. straight approach without the part as obstacle (the fingers go around it)
-        robot.set_obstacles([o for o in world if o.name != "table"])
+        _set_world(robot, world)
         down = _line(robot, chk, arm, pre.q, T_grasp, settings, (into, pick), f"approach at {pick[0]}")
         steps.append(Step(f"approach grasp {vid}", "path", arm, down))
         keyframes.append({"name": f"grasp_{pick[0]}", "arm": arm, "q": down[-1].tolist()})
@@ -426,7 +440,7 @@ def _realise(
         q_cur[arm] = back[-1]
         i = j + 1  # the edge after a hold is a transit (regrasp at that slot) or the end
     # 7. home, with the part now an obstacle where it was placed
-    robot.set_obstacles([o for o in world if o.name != "table"] + [Obstacle(part.name, part.mesh, T_part)])
+    _set_world(robot, world, Obstacle(part.name, part.mesh, T_part))
     for arm in robot.arms:
         home = robot.home(arm)
         if np.allclose(q_cur[arm], home):

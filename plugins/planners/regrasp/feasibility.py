@@ -37,9 +37,10 @@ __all__ = [
     "ScreenSettings",
     "approach_offset",
     "evaluate_slot",
-    "screened_ids",
+    "screen_slot",
     "variant_id",
     "variant_tcp",
+    "world_collider",
 ]
 
 FLIP_Z = np.diag([-1.0, -1.0, 1.0, 1.0])
@@ -77,15 +78,20 @@ def approach_offset(T_world_tcp: np.ndarray, distance: float) -> np.ndarray:
     return compose(T_world_tcp, from_rotation(np.eye(3), [0.0, 0.0, -distance]))
 
 
-def _screen(
-    grasps: Sequence[Grasp],
+def world_collider(world: Sequence[Obstacle]) -> MeshCollider:
+    """The world's obstacles (table included) for the open-hand screen; build once per world."""
+    return MeshCollider({o.name: (o.mesh, np.asarray(o.T_world, float)) for o in world})
+
+
+def screen_slot(
     slot: PoseSlot,
+    grasps: Sequence[Grasp],
     collider: MeshCollider,
     hand: HandSpec,
     settings: ScreenSettings,
-    on_table: bool,
+    on_table: bool = True,
 ) -> tuple[list[Grasp], dict[int, str]]:
-    """Grasps passing the cheap tests, and why the others fail (keyed by grasp id)."""
+    """Grasps passing the cheap tests at ``slot``, and why the others fail (keyed by grasp id)."""
     passed: list[Grasp] = []
     rejected: dict[int, str] = {}
     for g in grasps:
@@ -102,38 +108,22 @@ def _screen(
     return passed, rejected
 
 
-def screened_ids(
-    robot: Robot,
-    slot: PoseSlot,
-    grasps: Sequence[Grasp],
-    world: Sequence[Obstacle],
-    *,
-    settings: ScreenSettings,
-    on_table: bool = True,
-) -> set[int]:
-    """Ids of the grasps that pass the cheap tests at ``slot`` (no IK)."""
-    collider = MeshCollider({o.name: (o.mesh, np.asarray(o.T_world, float)) for o in world})
-    passed, _ = _screen(grasps, slot, collider, robot.hand, settings, on_table)
-    return {g.id for g in passed}
-
-
 def evaluate_slot(
     robot: Robot,
     slot: PoseSlot,
-    grasps: Sequence[Grasp],
+    screened: tuple[list[Grasp], dict[int, str]],
     arms: Sequence[str],
-    world: Sequence[Obstacle],
     *,
     settings: ScreenSettings,
-    on_table: bool = True,
     prefer: Iterable[int] = (),
     shared: dict[int, int] | None = None,
     seeds: dict[str, np.ndarray] | None = None,
 ) -> GraspFeasibility:
-    """IK and collision of the best screened grasps with the part at ``slot``.
+    """IK and collision of the best screened grasps (:func:`screen_slot`) with the part at ``slot``.
 
-    ``world`` holds the table and the other obstacles for this slot; the part
-    itself is not one, since the fingers touch it by design. Every arm is
+    The robot's obstacles must already hold the world for this slot (the
+    other part; the robot knows the table) and nothing may be held; the part
+    itself is not an obstacle, since the fingers touch it by design. Every arm is
     tried (nearest first) and each that works is kept. ``prefer`` lists grasp
     ids (not variants) to try before the others; ``shared`` counts, per grasp
     id, the other slots where it passes the screen (grasps usable at more
@@ -141,11 +131,8 @@ def evaluate_slot(
     ``(variant_id, arm)``; rejections keep their reason, keyed the same way
     with ``arm = ""`` for grasps screened out before IK.
     """
-    collider = MeshCollider({o.name: (o.mesh, np.asarray(o.T_world, float)) for o in world})
-    robot.set_obstacles([o for o in world if o.name != "table"])
-    robot.attach(arms[0], None)
-    passed, screened = _screen(grasps, slot, collider, robot.hand, settings, on_table)
-    rejected: dict[tuple[int, str], str] = {(variant_id(gid, False), ""): r for gid, r in screened.items()}
+    passed, screened_out = list(screened[0]), screened[1]
+    rejected: dict[tuple[int, str], str] = {(variant_id(gid, False), ""): r for gid, r in screened_out.items()}
     first = set(prefer)
     counts = shared or {}
     passed.sort(key=lambda g: (g.id not in first, -counts.get(g.id, 0), -g.score))
