@@ -79,7 +79,8 @@ class MarkerDetector:
 
 
 def _side_points(
-    grey: np.ndarray, a: np.ndarray, b: np.ndarray, outward: np.ndarray, half_width: float
+    grey: np.ndarray, a: np.ndarray, b: np.ndarray, outward: np.ndarray, half_width: float,
+    plateau_tol: float = 0.15,
 ) -> tuple[np.ndarray, int]:
     """Sub-pixel edge points along the side ``a -> b`` of a dark square on a bright margin.
 
@@ -87,6 +88,8 @@ def _side_points(
     blurred by any symmetric kernel narrower than the window, the step's
     position is the window end minus the area under the normalised profile,
     which needs no edge model and averages the noise of every sample.
+    Profiles that overshoot either plateau by more than ``plateau_tol`` of the
+    contrast (plus three noise levels) are not clean steps and are dropped.
     """
     side = b - a
     length = float(np.linalg.norm(side))
@@ -106,6 +109,14 @@ def _side_points(
     contrast = bright - dark
     ok = contrast > 15.0
     norm = (prof - dark[:, None]) / np.where(ok, contrast, 1.0)[:, None]
+    # A clean step rises once from one plateau to the other. When the window's bright end falls on something
+    # darker than the margin (the mating part hiding the quiet zone, a shadow, a finger), the profile overshoots
+    # its end level and the area estimate shifts the edge by a sizeable fraction of a pixel, with no trace in
+    # the line fit (the occluder's edge is straight too). Such profiles are dropped; the tolerance grows with
+    # the noise seen on the plateaus.
+    noise = np.maximum(prof[:, :k].std(axis=1), prof[:, -k:].std(axis=1)) / np.where(ok, contrast, 1.0)
+    tol = plateau_tol + 3.0 * noise
+    ok &= (norm.max(axis=1) <= 1.0 + tol) & (norm.min(axis=1) >= -tol)
     area = np.trapezoid(np.clip(norm, -0.5, 1.5), d, axis=1)
     offset = d[-1] - area  # position of the step along the outward normal
     ok &= np.abs(offset) < 0.8 * half_width

@@ -21,6 +21,7 @@ __all__ = [
     "RetreatCheck",
     "check_retreat",
     "direction_from_approach",
+    "free_cone_centre",
     "separation_direction",
 ]
 
@@ -100,6 +101,53 @@ def check_retreat(
     end_free = not pair.collides(_moved(T_A_B, -retract * v))
     return RetreatCheck(ok=end_free and first is None, end_free=end_free, path_free=first is None,
                         first_collision=first)
+
+
+def _path_free(pair: _Pair, T_A_B: np.ndarray, v: np.ndarray, retract: float, step: float) -> bool:
+    near = np.arange(2.0 * step, min(retract, 0.15) + 1e-12, step)
+    for s in np.concatenate([near, [retract]]):
+        if pair.collides(_moved(T_A_B, -s * v)):
+            return False
+    return True
+
+
+def free_cone_centre(
+    mesh_a: trimesh.Trimesh,
+    mesh_b: trimesh.Trimesh,
+    T_A_B: np.ndarray,
+    v_a: np.ndarray,
+    *,
+    cone_deg: float = 6.0,
+    rings: int = 12,
+    per_ring: int = 16,
+    retract: float = 0.5,
+    step: float = 0.001,
+    tolerance: float = 5e-4,
+) -> tuple[np.ndarray, int] | None:
+    """The demonstrated ``v_a`` corrected by geometry: the mean of the free retreat directions near it.
+
+    A tight fit (a peg in its hole, a slide in a slot) admits only a narrow
+    cone of straight retreats; a demonstrated direction a degree off can fall
+    just outside it. Directions within ``cone_deg`` of ``v_a`` (``rings``
+    rings of ``per_ring``) whose straight retreat is free are averaged: the
+    centre of the free cone seen from the demonstration. Returns ``(v_a,
+    number of free directions)`` or ``None`` when none near ``v_a`` is free
+    (the demonstration and the geometry disagree).
+    """
+    v = np.asarray(v_a, float) / np.linalg.norm(v_a)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(v[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(v, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(v, e1)
+    ang = np.radians(np.linspace(cone_deg / rings, cone_deg, rings))
+    az = np.linspace(0.0, 2 * np.pi, per_ring, endpoint=False)
+    dirs = [v] + [np.cos(a) * v + np.sin(a) * (np.cos(b) * e1 + np.sin(b) * e2) for a in ang for b in az]
+    pair = _Pair(mesh_a, mesh_b, tolerance)
+    free = [d for d in dirs if _path_free(pair, T_A_B, d, retract, step)]
+    if not free:
+        return None
+    c = np.mean(free, axis=0)
+    return c / np.linalg.norm(c), len(free)
 
 
 def separation_direction(

@@ -7,8 +7,12 @@ assembled frames are the largest cluster of consistent relative poses
 resolved by agreement with that cluster; outliers are rejected by
 reprojection error and by robust fusion (:mod:`.fusion`); a joint
 Levenberg-Marquardt adjustment over all kept frames (unknowns: ``T_A_B`` and
-each frame's ``T_cam_A``) polishes the fused pose. Frames before the
-assembled ones where B moves toward A give ``v_a`` (:mod:`.insertion`).
+each frame's ``T_cam_A``) polishes the fused pose and drops frames that do not
+fit one rigid ``T_A_B``. Frames before the assembled ones where B moves toward
+A, each refitted with B's rotation in A held at the taught one
+(:mod:`.approach`), give ``v_a`` (:mod:`.insertion`); a learned ``v_a`` that
+fails the python-fcl retreat check moves to the centre of the free retreat
+directions near it.
 """
 
 from __future__ import annotations
@@ -30,9 +34,15 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Teacher
 from asmteach.core.models import AssemblyTask, CameraIntrinsics, StrictModel, TeachingEvidence
 from asmteach.core.parts import build_part
+from asmteach.plugins.detectors.aruco.approach import refit_with_rotation
 from asmteach.plugins.detectors.aruco.detect import MarkerDetector, RefineMethod
 from asmteach.plugins.detectors.aruco.fusion import fuse_poses
-from asmteach.plugins.detectors.aruco.insertion import check_retreat, direction_from_approach, separation_direction
+from asmteach.plugins.detectors.aruco.insertion import (
+    check_retreat,
+    direction_from_approach,
+    free_cone_centre,
+    separation_direction,
+)
 from asmteach.plugins.detectors.aruco.markers import MarkerRef, marker_table
 from asmteach.plugins.detectors.aruco.pnp import MarkerObservation, PartPose, solve_part_pose
 
@@ -50,10 +60,14 @@ class ArucoTeacherSettings(StrictModel):
     assembled_angle_deg: float = Field(4.0, gt=0, description="... and rotations this close")
     fusion_k: float = Field(3.0, gt=0, description="outlier threshold of the fusion, robust standard deviations")
     joint_refine: bool = Field(True, description="joint LM adjustment of T_A_B over all kept frames")
+    joint_reject_px: float = Field(0.3, gt=0, description="joint adjustment drops frames whose RMS exceeds this and "
+                                   "four times the median")
     min_approach_frames: int = Field(3, ge=2, description="approach frames needed to learn v_a")
     min_approach_travel: float = Field(0.01, gt=0, description="B must travel this far toward A to learn v_a")
     check_insertion: bool = Field(True, description="check v_a with python-fcl; fall back to geometry if it fails")
     retract: float = Field(0.5, gt=0, description="retreat distance of the check along -v_a, metres")
+    snap_cone_deg: float = Field(6.0, gt=0, le=30, description="a learned v_a failing the check moves to the free "
+                                 "retreat directions within this cone, degrees")
     collision_tolerance: float = Field(5e-4, ge=0, description="meshes shrunk by this for contact checks, metres")
     threads: int | None = Field(None, ge=1, description="detection threads (default: all cores)")
 
@@ -166,27 +180,30 @@ class ArucoTeacher(Teacher):
         used = [r for r, keep in zip(cluster, fused.inliers, strict=True) if keep]
         T_A_B = fused.T
         if s.joint_refine and len(used) >= 2:
-            T_A_B, jnote = self._joint_refine(used, T_A_B, camera)
+            T_A_B, jnote, used = self._joint_refine(used, T_A_B, camera)
             notes.append(jnote)
-        # Insertion direction from the approach (frames before the assembled ones).
+        # Insertion direction from the approach (frames before the assembled ones), each frame refitted with
+        # B's rotation in A held at the taught one (:mod:`.approach`).
         first_used = min(r.index for r in used)
-        approach = [
-            r for r in results
-            if r.T_A_B is not None and r.index < first_used and r.rms_px <= s.frame_reject_px
-            and geometry.rotation_distance(r.T_A_B, T_A_B) < np.radians(10.0)
-            and geometry.translation_distance(r.T_A_B, T_A_B) > s.assembled_radius
-        ]
+        K, dist = camera.K, camera.dist_array
+        approach = []
+        for r in results:
+            if r.pose_a is None or r.pose_b is None or r.index >= first_used:
+                continue
+            pt = refit_with_rotation(r.index, r.pose_a, r.obs_a, r.pose_b, r.obs_b, T_A_B[:3, :3], K, dist)
+            if pt.rms_px <= s.frame_reject_px and np.linalg.norm(pt.position - T_A_B[:3, 3]) > s.assembled_radius:
+                approach.append(pt)
         v_a: np.ndarray | None = None
         source = "geometric"
         if len(approach) >= s.min_approach_frames:
-            pos = np.array([r.T_A_B[:3, 3] for r in approach])
+            pos = np.array([p.position for p in approach])
             travel = float(np.max(np.linalg.norm(pos - T_A_B[:3, 3], axis=1)))
             if travel >= s.min_approach_travel:
                 v_a, lateral, n_kept = direction_from_approach(pos, T_A_B[:3, 3])
                 source = "demonstration"
                 notes.append(
-                    f"v_a from {n_kept} of {len(approach)} approach frame(s): travel {travel * 1000:.1f} mm, "
-                    f"lateral rms {lateral * 1000:.2f} mm"
+                    f"v_a from {n_kept} of {len(approach)} approach frame(s) (B's rotation in A held at the taught "
+                    f"one): travel {travel * 1000:.1f} mm, lateral rms {lateral * 1000:.2f} mm"
                 )
             else:
                 notes.append(f"approach travel {travel * 1000:.1f} mm is too short to learn v_a")
@@ -202,15 +219,25 @@ class ArucoTeacher(Teacher):
             else:
                 notes.append(
                     f"learned v_a {np.round(v_a, 3).tolist()} fails the retreat check (collision at "
-                    f"{(chk.first_collision or s.retract) * 1000:.1f} mm); trying the geometric direction"
+                    f"{(chk.first_collision or s.retract) * 1000:.1f} mm)"
                 )
-                try:
-                    v_a, travel = separation_direction(*meshes, T_A_B, tolerance=s.collision_tolerance)
-                    source = "geometric"
-                    notes.append(f"v_a from geometry: least-travel free retreat ({travel * 1000:.0f} mm to clear A)")
-                except ValueError:
-                    # The taught pose itself interpenetrates beyond the tolerance: keep what was demonstrated.
-                    notes.append("no straight free retreat from the taught pose; keeping the demonstrated v_a")
+                cone = free_cone_centre(*meshes, T_A_B, v_a, cone_deg=s.snap_cone_deg, retract=s.retract,
+                                        tolerance=s.collision_tolerance)
+                if cone is not None:
+                    moved = float(np.degrees(np.arccos(np.clip(np.dot(cone[0], v_a), -1.0, 1.0))))
+                    v_a = cone[0]
+                    notes.append(f"v_a moved {moved:.2f} deg to the centre of the {cone[1]} free retreat direction(s) "
+                                 f"within {s.snap_cone_deg:g} deg of the demonstrated one (python-fcl)")
+                else:
+                    notes.append(f"no free retreat within {s.snap_cone_deg:g} deg; trying the geometric direction")
+                    try:
+                        v_a, travel = separation_direction(*meshes, T_A_B, tolerance=s.collision_tolerance)
+                        source = "geometric"
+                        notes.append(
+                            f"v_a from geometry: least-travel free retreat ({travel * 1000:.0f} mm to clear A)")
+                    except ValueError:
+                        # The taught pose itself interpenetrates beyond the tolerance: keep what was demonstrated.
+                        notes.append("no straight free retreat from the taught pose; keeping the demonstrated v_a")
         if v_a is None:
             assert meshes is not None
             try:
@@ -273,8 +300,15 @@ class ArucoTeacher(Teacher):
         return cluster, flips
 
     def _joint_refine(self, frames: list[FrameResult], T_A_B: np.ndarray, camera: CameraIntrinsics
-                      ) -> tuple[np.ndarray, str]:
-        """Least-squares over all kept frames' corners: unknowns ``T_A_B`` and each ``T_cam_A`` (Huber loss)."""
+                      ) -> tuple[np.ndarray, str, list[FrameResult]]:
+        """Least-squares over all kept frames' corners: unknowns ``T_A_B`` and each ``T_cam_A`` (Huber loss).
+
+        Frames whose RMS after the adjustment stands out (above four times the
+        median and ``joint_reject_px``) do not fit one rigid ``T_A_B`` with the
+        others (a marker corner pulled by a shadow or a finger, a pose left on
+        the wrong side of a flip): they are dropped and the adjustment is run
+        again. Returns ``(T_A_B, note, frames kept)``.
+        """
         K, dist = camera.K, camera.dist_array
         data = []
         for r in frames:
@@ -283,7 +317,6 @@ class ArucoTeacher(Teacher):
             obj_b = np.concatenate([o.object_points for o in r.obs_b if o.marker_id in r.pose_b.marker_ids])
             img_b = np.concatenate([o.corners_px for o in r.obs_b if o.marker_id in r.pose_b.marker_ids])
             data.append((obj_a, img_a, obj_b, img_b))
-        n = len(frames)
 
         def pack(T: np.ndarray) -> np.ndarray:
             return np.concatenate([cv2.Rodrigues(np.ascontiguousarray(T[:3, :3]))[0].ravel(), T[:3, 3]])
@@ -291,33 +324,58 @@ class ArucoTeacher(Teacher):
         def unpack(x: np.ndarray) -> np.ndarray:
             return geometry.from_rotation(cv2.Rodrigues(x[:3].reshape(3, 1))[0], x[3:6])
 
-        x0 = np.concatenate([pack(T_A_B)] + [pack(r.pose_a.T_cam_part) for r in frames])
-        sizes = [2 * (len(d[1]) + len(d[3])) for d in data]
+        def frame_res(T_cam_A: np.ndarray, T_ab: np.ndarray, i: int) -> np.ndarray:
+            obj_a, img_a, obj_b, img_b = data[i]
+            xa, xb = pack(T_cam_A), pack(T_cam_A @ T_ab)
+            pa = cv2.projectPoints(obj_a, xa[:3], xa[3:], K, dist)[0]
+            pb = cv2.projectPoints(obj_b, xb[:3], xb[3:], K, dist)[0]
+            return np.concatenate([(pa.reshape(-1, 2) - img_a).ravel(), (pb.reshape(-1, 2) - img_b).ravel()])
 
-        def residuals(x: np.ndarray) -> np.ndarray:
-            rvec_ab, t_ab = x[:3], x[3:6]
-            out = []
-            for i, (obj_a, img_a, obj_b, img_b) in enumerate(data):
-                xa = x[6 + 6 * i: 12 + 6 * i]
-                pa, _ = cv2.projectPoints(obj_a, xa[:3], xa[3:], K, dist)
-                Tb = unpack(xa) @ geometry.from_rotation(cv2.Rodrigues(rvec_ab.reshape(3, 1))[0], t_ab)
-                pb, _ = cv2.projectPoints(obj_b, cv2.Rodrigues(np.ascontiguousarray(Tb[:3, :3]))[0], Tb[:3, 3], K, dist)
-                out.append((pa.reshape(-1, 2) - img_a).ravel())
-                out.append((pb.reshape(-1, 2) - img_b).ravel())
-            return np.concatenate(out)
+        # Each frame's start: A's own pose or B's pose carried to A through the fused T_A_B (flip alternatives
+        # included), whichever fits both parts' corners best. A single square marker's pose can be tilted by
+        # degrees or flipped while the other part's is not; starting from it traps the joint problem.
+        starts = []
+        for i, r in enumerate(frames):
+            cands = [r.pose_a.T_cam_part] + [T for T, _ in r.pose_a.alternatives]
+            cands += [T @ geometry.invert(T_A_B) for T in [r.pose_b.T_cam_part] + [T for T, _ in r.pose_b.alternatives]]
+            starts.append(min(cands, key=lambda T, i=i: float(np.sum(frame_res(T, T_A_B, i) ** 2))))
+        active = list(range(len(frames)))
+        T0 = T_A_B
+        T = T_A_B
+        rms0 = float(np.sqrt(np.mean(np.concatenate([frame_res(starts[i], T0, i) for i in active]) ** 2) * 2))
+        dropped: list[int] = []
+        for _round in range(3):
+            n = len(active)
 
-        sparsity = lil_matrix((sum(sizes), 6 + 6 * n), dtype=int)
-        row = 0
-        for i, sz in enumerate(sizes):
-            sparsity[row: row + sz, 0:6] = 1
-            sparsity[row: row + sz, 6 + 6 * i: 12 + 6 * i] = 1
-            row += sz
-        r0 = residuals(x0)
-        sol = least_squares(residuals, x0, jac_sparsity=sparsity, loss="huber", f_scale=0.5, x_scale="jac",
-                            method="trf", max_nfev=50)
-        T = unpack(sol.x[:6])
-        rms0 = float(np.sqrt(np.mean(r0**2) * 2))
-        rms1 = float(np.sqrt(np.mean(sol.fun**2) * 2))
-        shift = geometry.translation_distance(T, T_A_B) * 1000.0
-        return T, (f"joint adjustment over {n} frame(s): RMS {rms0:.3f} -> {rms1:.3f} px, "
-                   f"moved T_A_B by {shift:.3f} mm")
+            def residuals(x: np.ndarray, active: list[int] = active) -> np.ndarray:
+                T_ab = unpack(x[:6])
+                return np.concatenate([frame_res(unpack(x[6 + 6 * k: 12 + 6 * k]), T_ab, i)
+                                       for k, i in enumerate(active)])
+
+            sizes = [2 * (len(data[i][1]) + len(data[i][3])) for i in active]
+            sparsity = lil_matrix((sum(sizes), 6 + 6 * n), dtype=int)
+            row = 0
+            for k, sz in enumerate(sizes):
+                sparsity[row: row + sz, 0:6] = 1
+                sparsity[row: row + sz, 6 + 6 * k: 12 + 6 * k] = 1
+                row += sz
+            x0 = np.concatenate([pack(T)] + [pack(starts[i]) for i in active])
+            sol = least_squares(residuals, x0, jac_sparsity=sparsity, loss="huber", f_scale=0.5, x_scale="jac",
+                                method="trf", max_nfev=200)
+            T = unpack(sol.x[:6])
+            for k, i in enumerate(active):
+                starts[i] = unpack(sol.x[6 + 6 * k: 12 + 6 * k])
+            per_frame = np.array([float(np.sqrt(np.mean(frame_res(starts[i], T, i) ** 2) * 2)) for i in active])
+            thr = max(4.0 * float(np.median(per_frame)), self.settings.joint_reject_px)
+            bad = [i for i, e in zip(active, per_frame, strict=True) if e > thr]
+            if not bad or n - len(bad) < max(2, self.settings.min_frames):
+                break
+            dropped += [frames[i].index for i in bad]
+            active = [i for i in active if i not in bad]
+        rms1 = float(np.sqrt(np.mean(np.concatenate([frame_res(starts[i], T, i) for i in active]) ** 2) * 2))
+        shift = geometry.translation_distance(T, T0) * 1000.0
+        note = (f"joint adjustment over {len(active)} frame(s): RMS {rms0:.3f} -> {rms1:.3f} px, "
+                f"moved T_A_B by {shift:.3f} mm")
+        if dropped:
+            note += f"; frame(s) {sorted(dropped)} dropped (do not fit one rigid T_A_B)"
+        return T, note, [frames[i] for i in active]

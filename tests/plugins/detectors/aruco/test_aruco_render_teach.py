@@ -51,18 +51,25 @@ def test_edge_refined_corners_are_subpixel_exact_and_pnp_recovers_pose(peg) -> N
     _task, a, b, cam = peg
     img, T_cam_A, T_cam_B, _ = _clean_frame(peg)
     found = MarkerDetector(["DICT_4X4_50"]).detect(img)
-    errs = []
+    errs, grazing = [], []
     for part, T in ((a, T_cam_A), (b, T_cam_B)):
         obs = [MarkerObservation(m.id, m.size, m.T_part_marker, found[(m.dictionary, m.id)])
                for m in part.spec.markers if (m.dictionary, m.id) in found]
         assert obs, f"no marker of {part.name} detected"
         for o in obs:
-            errs.append(np.linalg.norm(o.corners_px - project(T, o.object_points, cam.K, cam.dist_array), axis=1))
+            err = np.linalg.norm(o.corners_px - project(T, o.object_points, cam.K, cam.dist_array), axis=1)
+            T_cam_m = T @ o.T_part_marker
+            # Angle between the marker normal and the line of sight: beyond 60 deg the foreshortened border
+            # cells are under 2 px wide and the edge profiles are short, so those corners get a looser bound.
+            cos_view = -T_cam_m[:3, 2] @ T_cam_m[:3, 3] / np.linalg.norm(T_cam_m[:3, 3])
+            (errs if cos_view > 0.5 else grazing).append(err)
         pose = solve_part_pose(obs, cam.K, cam.dist_array)
         assert pose is not None
         assert geometry.translation_distance(pose.T_cam_part, T) < 1.0e-3
         assert geometry.rotation_distance(pose.T_cam_part, T) < np.radians(0.3)
+    assert errs, "no marker seen within 60 deg of square-on"
     assert float(np.sqrt(np.mean(np.concatenate(errs) ** 2))) < 0.12
+    assert all(float(e.max()) < 0.35 for e in grazing)
 
 
 def test_single_marker_flip_is_offered_as_alternative_or_resolved_by_prior(peg) -> None:
