@@ -28,6 +28,7 @@ import pybullet
 from pybullet_utils import bullet_client
 
 from asmteach.core import geometry
+from asmteach.core.convex_pieces import convex_pieces, pieces_obj
 from asmteach.core.cstdout import silenced_c_stdout
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
@@ -46,6 +47,12 @@ class GripperJoints:
     closed_values: list[float]
     tcp_link: str
     finger_links: list[str]
+
+
+CONTACT_MARGIN = 0.0
+"""Collision margin of parts and table, metres. Bullet's default (about 1 mm per body) lifts parts off
+the table and closes the 0.5 mm clearance of a peg in its hole; even 0.02 mm margins let a peg 0.3 mm off
+its hole's axis jam on the rim, while exact convex pieces collide robustly without one."""
 
 
 def _pose_to_pb(T: np.ndarray) -> tuple[list[float], list[float]]:
@@ -90,6 +97,12 @@ class PyBulletWorld:
             info = self.p.getJointInfo(self.robot, j)
             self.joint_index[info[1].decode()] = j
             self.link_index[info[12].decode()] = j
+        # Joints no plan moves (chest, head) would otherwise turn under the arms' reaction torques:
+        # a 1 deg chest drift moves the hands ~9 mm away from where the kinematic model puts them.
+        for j in self.joint_index.values():
+            if self.p.getJointInfo(self.robot, j)[2] in (pybullet.JOINT_REVOLUTE, pybullet.JOINT_PRISMATIC):
+                self.p.setJointMotorControl2(self.robot, j, pybullet.POSITION_CONTROL,
+                                             targetPosition=self.p.getJointState(self.robot, j)[0], force=1000.0)
         self.table_id: int | None = None
         self.parts: dict[str, tuple[int, PartModel]] = {}
         self.constraints: dict[str, tuple[int, str]] = {}  # arm -> (constraint id, part name)
@@ -141,12 +154,21 @@ class PyBulletWorld:
         vis = self.p.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=[0.55, 0.45, 0.35, 1.0])
         self.table_id = self.p.createMultiBody(0.0, col, vis, [table_center[0], table_center[1],
                                                                table_height - 0.5 * thickness])
-        self.p.changeDynamics(self.table_id, -1, lateralFriction=0.8)
+        self.p.changeDynamics(self.table_id, -1, lateralFriction=0.8, collisionMargin=CONTACT_MARGIN)
         for name, (part, T) in parts.items():
             self.spawn_part(name, part, T)
 
     def _collision_shape(self, part: PartModel) -> int:
         mesh = part.mesh
+        if part.spec.solid is not None:
+            # Exact convex pieces: V-HACD fills sub-millimetre clearances and inflates faces.
+            # PyBullet makes one convex hull per object of an OBJ file, as it does for V-HACD's output.
+            key = f"{part.source_hash or id(mesh)}_exact"
+            if key not in self._vhacd_cache:
+                out = Path(self._tmp.name) / f"{key}.obj"
+                out.write_text(pieces_obj(convex_pieces(part.spec.solid)))
+                self._vhacd_cache[key] = str(out)
+            return self.p.createCollisionShape(pybullet.GEOM_MESH, fileName=self._vhacd_cache[key])
         if mesh.is_convex:
             return self.p.createCollisionShape(pybullet.GEOM_MESH, vertices=np.asarray(mesh.vertices).tolist())
         key = part.source_hash or str(id(mesh))
@@ -172,7 +194,8 @@ class PyBulletWorld:
         pos, orn = _pose_to_pb(T)
         body = self.p.createMultiBody(part.mass, col, vis, pos, orn,
                                       baseInertialFramePosition=np.asarray(part.center_of_mass).tolist())
-        self.p.changeDynamics(body, -1, lateralFriction=1.0, spinningFriction=0.002, rollingFriction=0.0005)
+        self.p.changeDynamics(body, -1, lateralFriction=1.0, spinningFriction=0.002, rollingFriction=0.0005,
+                              collisionMargin=CONTACT_MARGIN)
         self.parts[name] = (body, part)
         return body
 
@@ -193,7 +216,7 @@ class PyBulletWorld:
             self.p.stepSimulation()
 
     def track(self, names: list[str], times: np.ndarray, positions: np.ndarray, speed: np.ndarray,
-              forces: np.ndarray, settle: float = 0.5, tol: float = 2e-3) -> np.ndarray:
+              forces: np.ndarray, settle: float = 1.0, tol: float = 1e-4) -> np.ndarray:
         """Follow a time-parametrised path with position control, capped at ``speed`` (rad/s).
 
         The path is sampled at every physics step (linear between waypoints);
@@ -224,7 +247,10 @@ class PyBulletWorld:
         ids = self.joint_ids(g.finger_joints)
         if not close:
             if arm in self.constraints:
-                self.p.removeConstraint(self.constraints.pop(arm)[0])
+                cid, held = self.constraints.pop(arm)
+                self.p.removeConstraint(cid)
+                if held in self.parts:
+                    self._finger_contacts(g, self.parts[held][0], enable=True)
             for j, v in zip(ids, g.open_values, strict=True):
                 self.p.setJointMotorControl2(self.robot, j, pybullet.POSITION_CONTROL, targetPosition=v, force=force,
                                              maxVelocity=speed)
@@ -268,8 +294,15 @@ class PyBulletWorld:
         cid = self.p.createConstraint(self.robot, self.link_index[g.tcp_link], body, -1, pybullet.JOINT_FIXED,
                                       [0, 0, 0], p_rel, [0, 0, 0], parentFrameOrientation=q_rel)
         self.p.changeConstraint(cid, maxForce=10000.0)
+        # The weld stands in for friction; finger contacts on top of it fight the constraint and make the
+        # part creep in the hand during fast motions (millimetres per carry), so they are off while held.
+        self._finger_contacts(g, body, enable=False)
         self.constraints[arm] = (cid, part or "")
         return True
+
+    def _finger_contacts(self, g: GripperJoints, body: int, enable: bool) -> None:
+        for link in g.finger_links:
+            self.p.setCollisionFilterPair(self.robot, body, self.link_index[link], -1, int(enable))
 
     # ------------------------------------------------------------ cameras
     def rgb(self, T_world_cam: np.ndarray, width: int, height: int, fx: float, fy: float, cx: float, cy: float,

@@ -42,14 +42,48 @@ def test_gripper_holds_a_box_when_lifted() -> None:
         _move(robot, "left", ik_above.q)
         _move(robot, "left", ik_grasp.q)
         assert robot.grip("left", True, "box")
+        T_tcp_box = np.linalg.solve(robot.fk("left", robot.current("left")), robot.part_pose("box"))
         _move(robot, "left", ik_above.q)
+        _move(robot, "left", robot.ik("left", above @ np.diag([1.0, 1.0, 1.0, 1.0]) @ _rz(1.2), ik_above.q).q)
         lifted = robot.part_pose("box")
         assert lifted[2, 3] > rest[2, 3] + 0.1  # it came up with the hand
         T_tcp = robot.fk("left", robot.current("left"))
-        assert np.linalg.norm(lifted[:3, 3] - T_tcp[:3, 3]) < 0.01  # and did not slip
+        # the kinematic model and the simulator agree on the hand (no joint outside the arm drifted) ...
+        T_tcp_sim = robot.sim.link_pose("LARM_TCP_Link")
+        assert np.linalg.norm(T_tcp_sim[:3, 3] - T_tcp[:3, 3]) < 1e-4
+        # ... and the box did not move in the hand through the lift and a wrist turn
+        assert np.linalg.norm((T_tcp @ T_tcp_box)[:3, 3] - lifted[:3, 3]) < 3e-4
         assert robot.grip("left", False) is False
         robot.sim.step(240)
         assert robot.part_pose("box")[2, 3] < 0.03  # released: it fell back to the table
+
+
+def _rz(yaw: float) -> np.ndarray:
+    T = np.eye(4)
+    T[:2, :2] = [[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]
+    return T
+
+
+def test_peg_drops_into_its_half_millimetre_clearance_hole() -> None:
+    """Exact convex pieces and thin contact margins: parts rest on the table and a peg enters its hole."""
+    block = build_part(PartSpec(name="block", solid=SolidSpec(
+        add=[Primitive(shape="box", size=[0.08, 0.06, 0.04], pose={"xyz": [0, 0, 0.02]})],
+        subtract=[Primitive(shape="cylinder", radius=0.0105, height=0.05, pose={"xyz": [0, 0, 0.04]})])))
+    peg = build_part(PartSpec(name="peg", solid=SolidSpec(
+        add=[Primitive(shape="cylinder", radius=0.010, height=0.03, pose={"xyz": [0, 0, 0.015]}),
+             Primitive(shape="box", size=[0.04, 0.04, 0.03], pose={"xyz": [0, 0, 0.045]})])))
+    with NextagePyBullet({}) as robot:
+        T_block = _rz(0.3)
+        T_block[:3, 3] = [0.40, -0.30, 0.0]
+        T_peg = T_block.copy()
+        T_peg[:3, 3] += [0.0002, -0.0002, 0.045]  # 30 mm above its seat, 0.3 mm off the axis
+        robot.reset_world(TablePlane(height=0.0), {"block": (block, T_block), "peg": (peg, T_peg)})
+        robot.sim.step(480)
+        on_table = robot.part_pose("block")
+        assert abs(on_table[2, 3]) < 2e-4
+        seat = np.linalg.solve(on_table, robot.part_pose("peg"))[:3, 3]
+        assert abs(seat[2] - 0.015) < 5e-4  # the shank reached the bottom of the blind hole
+        assert np.hypot(seat[0], seat[1]) < 6e-4
 
 
 def test_trajectory_checks() -> None:
