@@ -361,6 +361,18 @@ class Robot(Plugin):
         """``T_world_cam`` (4x4, metres, OpenCV camera frame: z forward, y down) of the depth camera."""
         raise NotImplementedError(f"{type(self).__name__} has no depth camera")
 
+    def verify_plan(self, plan: Plan, parts: dict[str, tuple[PartModel, np.ndarray]], table: TablePlane,
+                    resolution: float = 0.005) -> Any:
+        """Re-check ``plan`` with a collision model independent of the planner's.
+
+        ``parts`` maps a part name to its model and start pose ``T_world_part``
+        (metres); arms start at :meth:`home`; ``resolution`` is the largest
+        motion (metres) of any robot or held-part point between checks. Returns
+        a pydantic model with at least ``ok: bool``, ``collisions: list`` and
+        ``summary() -> str``.
+        """
+        raise NotImplementedError(f"{type(self).__name__} has no independent plan check")
+
     def close(self) -> None:
         """Release the simulator and any other resources."""
 

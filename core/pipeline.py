@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import itertools
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -30,6 +30,7 @@ from asmteach.core.io import to_jsonable, write_json, write_model
 from asmteach.core.models import AssemblyTask, Detection, Plan, RunReport, StageOutcome, StrictModel, TablePlane
 from asmteach.core.parts import build_part, load_structure
 from asmteach.core.scene import SceneSettings, random_start_poses
+from asmteach.core.symmetry import part_symmetries
 
 __all__ = ["ExecutionSettings", "StageFailed", "pose_error", "run_pipeline"]
 
@@ -43,6 +44,7 @@ class ExecutionSettings(StrictModel):
     success_position_mm: float = Field(2.0, gt=0.0, description="B in A: position tolerance")
     success_angle_deg: float = Field(2.0, gt=0.0, description="B in A: rotation tolerance")
     success_a_goal_mm: float = Field(3.0, gt=0.0, description="A at its goal: position tolerance")
+    recheck_plan: bool = Field(True, description="re-check the plan with the robot's independent collision check")
 
 
 class StageFailed(Exception):
@@ -60,6 +62,25 @@ def pose_error(T_est: np.ndarray, T_true: np.ndarray) -> dict[str, float]:
         "position_mm": 1000.0 * geometry.translation_distance(T_est, T_true),
         "angle_deg": float(np.degrees(geometry.rotation_distance(T_est[:3, :3], T_true[:3, :3]))),
     }
+
+
+def symmetric_pose_error(T_est: np.ndarray, T_ref: np.ndarray, left: Sequence[np.ndarray] = (),
+                         right: Sequence[np.ndarray] = ()) -> dict[str, float]:
+    """:func:`pose_error` of ``T_est`` against the nearest of ``inv(S_l) @ T_ref @ S_r`` (mm, deg).
+
+    ``left`` holds the symmetries of the reference frame's part, ``right``
+    those of the estimated part (part-frame transforms from
+    :func:`asmteach.core.symmetry.part_symmetries`): poses that differ by
+    them put the same solid in the same place.
+    """
+    best: dict[str, float] | None = None
+    for S_l in left or [np.eye(4)]:
+        for S_r in right or [np.eye(4)]:
+            err = pose_error(T_est, geometry.invert(S_l) @ T_ref @ S_r)
+            if best is None or err["position_mm"] + err["angle_deg"] < best["position_mm"] + best["angle_deg"]:
+                best = err
+    assert best is not None
+    return best
 
 
 def symmetric_surface_error(part: PartModel, T_est: np.ndarray, T_true: np.ndarray, n: int = 500) -> float:
@@ -82,10 +103,17 @@ class _Run:
     def __init__(self, cfg: RunConfig, out_dir: Path, pm: Any | None) -> None:
         self.cfg, self.out, self.pm = cfg, Path(out_dir), pm
         self.report = RunReport(config=cfg.model_dump(mode="json"), seed=cfg.seed)
+        self._symmetries: dict[str, list[np.ndarray]] = {}
         try:
             self.execution = ExecutionSettings.model_validate(cfg.execution)
         except ValidationError as exc:
             raise UserError(format_validation_error(exc, "execution")) from None
+
+    def symmetries(self, part: PartModel) -> list[np.ndarray]:
+        """The part's symmetry transforms (part frame), computed once per run."""
+        if part.name not in self._symmetries:
+            self._symmetries[part.name] = part_symmetries(part.mesh, np.asarray(part.center_of_mass, float))
+        return self._symmetries[part.name]
 
     def plugin(self, key: str) -> Any:
         choice = getattr(self.cfg, key)
@@ -225,7 +253,7 @@ def _detect(run: _Run, robot: Robot, parts: tuple[PartModel, ...], table: TableP
             for key in ("rough", "corrected"):
                 T = getattr(det, key)
                 if T is not None:
-                    err = pose_error(T, T_true)
+                    err = symmetric_pose_error(T, T_true, (), run.symmetries(part))
                     err["surface_mm"] = symmetric_surface_error(part, T, T_true)
                     det.details[f"{key}_error"] = err
             out[part.name] = det
@@ -283,6 +311,16 @@ def _plan(run: _Run, robot: Robot, task: AssemblyTask, a: PartModel, b: PartMode
         run.artefact("plan", run.out / "plan.json", "json")
         if not result.success:
             raise StageFailed(result.reason or "assembly planning failed", {"failed_at": result.failed_at})
+        if run.execution.recheck_plan:
+            try:
+                chk = robot.verify_plan(result.plan, {a.name: (a, problem.T_world_a), b.name: (b, problem.T_world_b)},
+                                        table)
+            except NotImplementedError:
+                chk = None
+            if chk is not None:
+                # Recorded, not fatal: execution and measurement say whether the parts got assembled.
+                d["recheck"] = chk.summary()
+                run.report.metrics["plan_recheck_collisions"] = len(chk.collisions)
         return result
 
 
@@ -293,20 +331,79 @@ def _execute(run: _Run, robot: Robot, plan: Plan) -> list[np.ndarray]:
         period = 1.0 / run.execution.animation_fps
         if record:
             frames.append(robot.sense_rgb())
+        trace = _ExecutionTrace(robot)
+        d["trace"] = trace.events
         for seg in plan.segments:
             if seg.trajectory is not None:
                 for chunk in _chunks(seg.trajectory, period if record else None):
                     robot.execute(chunk)
                     if record:
                         frames.append(robot.sense_rgb())
+                trace.after_path(seg.label, seg.trajectory)
             elif seg.gripper is not None:
-                ok = robot.grip(seg.gripper.arm, seg.gripper.action == "close", seg.gripper.attach)
-                if seg.gripper.action == "close" and not ok:
+                ev = seg.gripper
+                close = ev.action == "close"
+                trace.before_grip(seg.label, ev.arm, close, ev.attach)
+                ok = robot.grip(ev.arm, close, ev.attach)
+                if close and not ok:
                     raise StageFailed(f"{seg.label}: the fingers did not close on the part")
+                trace.after_grip(ev.arm, close, ev.attach)
             run.hook("asmteach_stage_progress", stage="execute", advance=1, message=seg.label)
         d["segments"] = len(plan.segments)
         d["frames_recorded"] = len(frames)
+        d["max_tracking_error_rad"] = trace.max_tracking_error
     return frames
+
+
+class _ExecutionTrace:
+    """What happened to the parts during execution, against what the plan assumed.
+
+    One event per gripper action: the part's pose (mm, deg); on close, how far
+    it moved since its release (toppled, pushed); on release, how far it
+    slipped in the hand while held and how far it dropped when let go (mm).
+    """
+
+    def __init__(self, robot: Robot) -> None:
+        self.robot = robot
+        self.events: list[dict[str, Any]] = []
+        self.held: dict[str, str] = {}  # arm -> part
+        self.T_tcp_part: dict[str, np.ndarray] = {}  # part -> its pose in the hand at the close
+        self.T_released: dict[str, np.ndarray] = {}  # part -> T_world_part after its last release
+        self.max_tracking_error = 0.0
+
+    def _tcp(self, arm: str) -> np.ndarray:
+        return self.robot.fk(arm, self.robot.current(arm))
+
+    def after_path(self, label: str, traj: Any) -> None:
+        err = float(np.max(np.abs(self.robot.current(traj.arm) - np.asarray(traj.positions)[-1])))
+        self.max_tracking_error = max(self.max_tracking_error, err)
+
+    def before_grip(self, label: str, arm: str, close: bool, part: str | None) -> None:
+        part = part if close else self.held.get(arm)
+        ev: dict[str, Any] = {"label": label}
+        if part is not None:
+            T = self.robot.part_pose(part)
+            ev.update(part=part, **geometry.to_xyz_mm_rpy_deg(T))
+            if close and part in self.T_released:
+                moved = geometry.translation_distance(T, self.T_released[part])
+                ev["moved_since_release_mm"] = round(1000.0 * moved, 2)
+            if not close and part in self.T_tcp_part:
+                T_expected = self._tcp(arm) @ self.T_tcp_part[part]
+                ev["slip_in_hand_mm"] = round(1000.0 * geometry.translation_distance(T, T_expected), 2)
+        self.events.append(ev)
+
+    def after_grip(self, arm: str, close: bool, part: str | None) -> None:
+        if close and part is not None:
+            self.held[arm] = part
+            self.T_tcp_part[part] = geometry.invert(self._tcp(arm)) @ self.robot.part_pose(part)
+            return
+        part = self.held.pop(arm, None)
+        if part is not None:
+            T = self.robot.part_pose(part)
+            before = self.events[-1]
+            moved = np.subtract(T[:3, 3] * 1000.0, before.get("xyz_mm", T[:3, 3] * 1000.0))
+            before["dropped_mm"] = round(float(np.linalg.norm(moved)), 2)
+            self.T_released[part] = T
 
 
 def _chunks(traj: Any, period: float | None) -> list[Any]:
@@ -337,9 +434,11 @@ def _measure(run: _Run, robot: Robot, learned: AssemblyTask, true_task: Assembly
     with run.stage("measure") as d:
         T_a, T_b = robot.part_pose(a.name), robot.part_pose(b.name)
         T_A_B = geometry.invert(T_a) @ T_b
-        vs_taught = pose_error(T_A_B, learned.T_A_B)
-        vs_true = pose_error(T_A_B, true_task.T_A_B)
-        a_goal_mm = 1000.0 * geometry.translation_distance(T_a, result.T_world_a_goal)
+        # A symmetric part may be detected, and so assembled, in any of its symmetric poses.
+        sym_a, sym_b = run.symmetries(a), run.symmetries(b)
+        vs_taught = symmetric_pose_error(T_A_B, learned.T_A_B, sym_a, sym_b)
+        vs_true = symmetric_pose_error(T_A_B, true_task.T_A_B, sym_a, sym_b)
+        a_goal_mm = symmetric_pose_error(T_a, result.T_world_a_goal, (), sym_a)["position_mm"]
         ex = run.execution
         ok = (vs_taught["position_mm"] <= ex.success_position_mm and vs_taught["angle_deg"] <= ex.success_angle_deg
               and a_goal_mm <= ex.success_a_goal_mm)

@@ -253,8 +253,9 @@ def _detections_section(report: RunReport) -> str:
             err_pos = err_rot = ""
             if T_true is not None:
                 err = pose_errors(T, T_true)
-                err_pos = f"{err['pos_mm']:.2f} ({_vec(err['dxyz_mm'])})"
-                err_rot = f"{err['rot_deg']:.2f}"
+                rec = det.details.get(f"{label}_error") or {}  # measured modulo the part's symmetries
+                err_pos = f"{rec.get('position_mm', err['pos_mm']):.2f} ({_vec(err['dxyz_mm'])})"
+                err_rot = f"{rec.get('angle_deg', err['rot_deg']):.2f}"
             note = []
             if label == "rough" and det.fitness is not None:
                 note.append(f"fitness {det.fitness:.3f}")
@@ -368,7 +369,10 @@ def format_summary(report: RunReport) -> str:
             err = ""
             if T_true is not None:
                 e = pose_errors(T, T_true)
-                err = f"  error {e['pos_mm']:.2f} mm / {e['rot_deg']:.2f} deg"
+                key = "corrected_error" if det.corrected is not None else "rough_error"
+                rec = det.details.get(key) or {}  # measured modulo the part's symmetries
+                err = (f"  error {rec.get('position_mm', e['pos_mm']):.2f} mm / "
+                       f"{rec.get('angle_deg', e['rot_deg']):.2f} deg")
             lines.append(f"  {det.part}: [{xyz}] mm{err}")
     if report.metrics:
         lines.append("metrics:")

@@ -30,9 +30,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-import trimesh
 from pydantic import Field
-from scipy.spatial.transform import Rotation
 
 from asmteach.core import geometry, registry
 from asmteach.core.config import TableSettings
@@ -41,6 +39,7 @@ from asmteach.core.io import write_text
 from asmteach.core.models import Placement, StrictModel, TablePlane
 from asmteach.core.parts import build_part, load_structure
 from asmteach.core.sweep import Experiment, to_csv, to_markdown
+from asmteach.core.symmetry import part_symmetries
 from asmteach.plugins.detectors.cvfh.commands import run_detection
 from asmteach.plugins.detectors.cvfh.scenes import QUARTERS, default_camera_pose, place_on_table, render_table_scene
 from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings
@@ -86,41 +85,6 @@ def _placements(path: str, which: str) -> tuple[Placement, ...]:
     from asmteach.plugins.planners.placements.planner import compute_placements
 
     return tuple(compute_placements(_load_part(path, which)))
-
-
-def part_symmetries(mesh: trimesh.Trimesh, com: np.ndarray, tol: float = 0.0005) -> list[np.ndarray]:
-    """Proper rotations (``(4, 4)``, part frame, about the centre of mass) that map the part onto itself.
-
-    Candidates are the 24 rotations of the cube group about the part-frame
-    axes and about the principal axes of inertia; a candidate is kept when
-    every one of 1500 surface samples lands within ``tol`` metres of the
-    surface. Placement symmetry yaws only cover turns about the vertical; a
-    part lying on its side can also be symmetric about a horizontal axis
-    (the T-slider), which this finds too.
-    """
-    import open3d as o3d
-
-    cube = [R.as_matrix() for R in Rotation.create_group("O")]
-    frames = [np.eye(3), np.asarray(mesh.principal_inertia_vectors, dtype=float).T]
-    if np.linalg.det(frames[1]) < 0:
-        frames[1][:, 2] *= -1.0
-    pts, _ = trimesh.sample.sample_surface(mesh, 1500, seed=0)
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(np.asarray(mesh.vertices, dtype=np.float32)),
-        o3d.core.Tensor(np.asarray(mesh.faces, dtype=np.uint32)),
-    )
-    found: list[np.ndarray] = []
-    for F in frames:
-        for C in cube:
-            R = F @ C @ F.T
-            if any(np.allclose(R, S[:3, :3], atol=1e-6) for S in found):
-                continue
-            moved = (pts - com) @ R.T + com
-            d = scene.compute_distance(o3d.core.Tensor(moved.astype(np.float32))).numpy()
-            if float(d.max()) < tol:
-                found.append(geometry.from_rotation(R, com - R @ com))
-    return found or [np.eye(4)]
 
 
 @lru_cache(maxsize=16)

@@ -74,6 +74,9 @@ class AssemblySettings(StrictModel):
     min_down: float = Field(0.3, ge=-1.0, le=1.0, description="cosine: approach to a part on the table from above")
     pregrasp_distance: float = Field(0.06, gt=0.0, description="approach stand-off along the TCP -z")
     lift: float = Field(0.08, gt=0.0, description="lift above the table after grasping / before placing")
+    release_gap: float = Field(
+        0.001, ge=0.0, le=0.01,
+        description="a part placed on the table is let go this far above it (pressing it down makes it shift)")
     cartesian_step: float = Field(0.004, gt=0.0, description="TCP step of straight-line motions")
     regrasp_penalty: float = Field(10.0, ge=0.0, description="graph weight of one regrasp")
     motion_weight: float = Field(1.0, ge=0.0, description="graph weight per radian of joint motion")
@@ -384,10 +387,20 @@ def _realise(
         def plan_free(q_a: np.ndarray, q_b: np.ndarray, edge: tuple[Any, Any], what: str, arm: str = arm) -> np.ndarray:
             return _free(robot, planner, arm, q_a, q_b, settings, edge, what, clearances)
 
-        # 1. free motion to the pre-grasp pose; the part is an obstacle where it lies
-        T_grasp = slot_pick.T_world_part @ variant_tcp(grasps, vid)
+        # 0. the other arms go home (the grasp graph was screened with them there) and stay put
         robot.attach(arm, None)
         _set_world(robot, world, Obstacle(part.name, part.mesh, T_part))
+        robot.set_configuration(arm, q_cur[arm])
+        for other in robot.arms:
+            if other != arm and not np.allclose(q_cur[other], robot.home(other)):
+                robot.set_configuration(other, q_cur[other])
+                path = _free(robot, planner, other, q_cur[other], robot.home(other), settings, (into, pick),
+                             f"{other} arm home before the {arm} arm picks", clearances)
+                steps.append(Step(f"{other} arm home", "path", other, path))
+                q_cur[other] = robot.home(other)
+            robot.set_configuration(other, q_cur[other])
+        # 1. free motion to the pre-grasp pose; the part is an obstacle where it lies
+        T_grasp = slot_pick.T_world_part @ variant_tcp(grasps, vid)
         pre = robot.ik(arm, approach_offset(T_grasp, settings.pregrasp_distance), q_seed=G.nodes[pick]["q"])
         if not pre.success or pre.q is None or getattr(pre, "flipped", False):
             raise _MotionFailure((into, pick), f"pre-grasp pose at {pick[0]} has no IK solution")
@@ -424,7 +437,10 @@ def _realise(
                           "arm": arm, "q": np.asarray(above.q).tolist()})
         # 5. final straight move: place on the table, or insert along v_a
         touch = goal.touch if final else ("table",)
-        last = _line(robot, chk, arm, above.q, T_place_tcp, settings, (pick, nodes[i + 1]),
+        T_release = T_place_tcp.copy()
+        if goal.on_table or not final:
+            T_release[2, 3] += settings.release_gap
+        last = _line(robot, chk, arm, above.q, T_release, settings, (pick, nodes[i + 1]),
                      f"{'insertion' if final and not goal.on_table else 'placing'} at {place[0]}", ignore=touch)
         steps.append(Step(f"{'insert' if final and not goal.on_table else 'place'} {part.name} at {place[0]}",
                           "path", arm, last))
@@ -443,6 +459,8 @@ def _realise(
     _set_world(robot, world, Obstacle(part.name, part.mesh, T_part))
     for arm in robot.arms:
         home = robot.home(arm)
+        for other in robot.arms:
+            robot.set_configuration(other, q_cur[other])
         if np.allclose(q_cur[arm], home):
             continue
         path = _free(robot, planner, arm, q_cur[arm], home, settings, (nodes[-1], GOAL), f"{arm} arm back home",

@@ -5,8 +5,10 @@ positions (``asmteach.core.scene``, seeded), exact start poses (planning is
 measured alone, without detection), the configured motion planner. Recorded:
 success and the reason of a failure, seconds per stage (feasibility graph,
 keyframe search, motions, total), regrasps per part, joint-path length, plan
-duration, and the minimum clearance (mm) of the free motions re-checked every
-0.01 rad with the robot's own collision model.
+duration, the minimum clearance (mm) of the free motions (robot's own collision
+model), and the independent re-check of the whole plan (PyBullet contact
+queries on the same URDF, every 5 mm of motion: ``recheck_ok``,
+``recheck_collisions``, ``recheck_min_distance_mm``).
 """
 
 from __future__ import annotations
@@ -35,13 +37,16 @@ class AssemblyPlanningParams(StrictModel):
     planner_settings: dict[str, Any] = Field(default_factory=dict)
     robot_settings: dict[str, Any] = Field(default_factory=lambda: {"ik": {"max_starts": 4}})
     scene: SceneSettings = Field(default_factory=SceneSettings)
+    recheck: bool = Field(True, description="re-check every successful plan with the robot's independent checker")
+    recheck_resolution: float = Field(0.005, gt=0.0, description="metres any point may move between re-checks")
 
 
 class AssemblyPlanningExperiment(Experiment):
     """Success, time per stage, regrasps, path length and clearance of whole two-part plans."""
 
     Params = AssemblyPlanningParams
-    plot_metrics = ("success", "seconds", "motion_seconds", "regrasps", "path_length", "min_clearance_mm")
+    plot_metrics = ("success", "recheck_ok", "seconds", "motion_seconds", "regrasps", "path_length",
+                    "min_clearance_mm")
 
     def run_trial(self, params: AssemblyPlanningParams, seed: int, workdir: Path) -> dict[str, Any]:
         task = load_structure(self.path(params.structure))
@@ -74,6 +79,15 @@ class AssemblyPlanningExperiment(Experiment):
                     for s in res.plan.segments if s.trajectory is not None))
                 mins = [(stats.get(p) or {}).get("min_clearance_m", np.nan) for p in ("A", "B")]
                 row["min_clearance_mm"] = 1000.0 * float(np.nanmin(mins))
+                if params.recheck:
+                    chk = robot.verify_plan(res.plan, {a.name: (a, T_a), b.name: (b, T_b)}, problem.table,
+                                            resolution=params.recheck_resolution)
+                    row["recheck_ok"] = bool(chk.ok)
+                    row["recheck_collisions"] = len(chk.collisions)
+                    row["recheck_min_distance_mm"] = 1000.0 * float(chk.min_distance_m)
+                    row["recheck_seconds"] = float(chk.seconds)
+                    if not chk.ok:
+                        row["reason"] = f"re-check: {chk.summary()}"
             return row
         finally:
             robot.close()

@@ -55,6 +55,15 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         *,
         progress: Callable[[str], None] | None = None,
     ) -> AssemblyResult:
+        q_before = {arm: robot.current(arm) for arm in robot.arms}
+        try:
+            return self._plan(problem, robot, motion_planner, progress)
+        finally:
+            for arm, q in q_before.items():  # planning moves the arms around; leave them as they were
+                robot.set_configuration(arm, q)
+
+    def _plan(self, problem: AssemblyProblem, robot: Robot, motion_planner: MotionPlanner,
+              progress: Callable[[str], None] | None) -> AssemblyResult:
         s = self.settings
         t0 = time.perf_counter()
         a, b, h = problem.part_a, problem.part_b, problem.table.height

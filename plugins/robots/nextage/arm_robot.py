@@ -21,9 +21,10 @@ from pydantic import Field
 
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import IKResult, Obstacle, PartModel, Robot
-from asmteach.core.models import HandSpec, StrictModel, TablePlane, Trajectory
+from asmteach.core.models import HandSpec, Plan, StrictModel, TablePlane, Trajectory
 from asmteach.plugins.robots.nextage.collision import CollisionChecker
 from asmteach.plugins.robots.nextage.kinematics import IKSettings, Kinematics
+from asmteach.plugins.robots.nextage.plan_check import CheckedArm, PlanCheck, recheck_plan
 from asmteach.plugins.robots.nextage.sim import GripperJoints, PyBulletWorld
 
 __all__ = ["ArmRobot", "ArmRobotSettings", "CameraMount"]
@@ -250,6 +251,34 @@ class ArmRobot(Robot):
         elif not close:
             self.checker.attach(arm, None)
         return held
+
+    def verify_plan(self, plan: Plan, parts: dict[str, tuple[PartModel, np.ndarray]], table: TablePlane,
+                    resolution: float = 0.005) -> PlanCheck:
+        """Re-check ``plan`` independently of the planner's collision model, in PyBullet.
+
+        Replays the plan kinematically in a separate PyBullet DIRECT client built from this
+        robot's URDF, base pose and table settings (extent from the settings, top at
+        ``table.height``), with the arms starting at :meth:`home` and ``parts`` (name -> model and
+        start pose ``T_world_part``, metres) spawned as for execution. Every trajectory is
+        checked so densely that no point of the robot or of a held part moves more than
+        ``resolution`` metres between checks. A collision is a penetration deeper than 0.5 mm
+        between any robot link and the table or a part, a held part and the table or another
+        part, or two robot links (except links joined by a joint and the pairs this robot never
+        checks); allowed are the holding hand touching its part and the held part touching the
+        table on close/lift/place/insert and the other part on close/insert
+        (:data:`~asmteach.plugins.robots.nextage.plan_check.TOUCH_RULES`). The simulator this
+        robot executes in is not touched.
+
+        Returns a :class:`~asmteach.plugins.robots.nextage.plan_check.PlanCheck`: ``ok``, the
+        configurations checked, the least signed distance (metres) and every colliding pair with
+        its segment index, label, time (s from the segment's start) and penetration (metres).
+        """
+        arms = {a: CheckedArm(tuple(s.joints), s.tcp_link, tuple(s.gripper.finger_joints),
+                              tuple(s.gripper.open_values), tuple(s.hand_links)) for a, s in self._arms.items()}
+        st = self.settings
+        return recheck_plan(self.urdf, self.T_world_base, plan, parts, arms, {a: self.home(a) for a in self.arms},
+                            table_center=st.table_center, table_size=st.table_size, table_height=table.height,
+                            skip_pairs=self.checker.disabled, resolution=resolution)
 
     def part_pose(self, name: str) -> np.ndarray:
         return self.sim.part_pose(name)
