@@ -23,11 +23,8 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 from pydantic import Field
-from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
 
 from asmteach.core import geometry
 from asmteach.core.errors import UserError
@@ -43,6 +40,7 @@ from asmteach.plugins.detectors.aruco.insertion import (
     free_cone_centre,
     separation_direction,
 )
+from asmteach.plugins.detectors.aruco.joint import CornerSet, adjust, frame_rms
 from asmteach.plugins.detectors.aruco.markers import MarkerRef, marker_table
 from asmteach.plugins.detectors.aruco.pnp import MarkerObservation, PartPose, solve_part_pose
 
@@ -301,7 +299,8 @@ class ArucoTeacher(Teacher):
 
     def _joint_refine(self, frames: list[FrameResult], T_A_B: np.ndarray, camera: CameraIntrinsics
                       ) -> tuple[np.ndarray, str, list[FrameResult]]:
-        """Least-squares over all kept frames' corners: unknowns ``T_A_B`` and each ``T_cam_A`` (Huber loss).
+        """Least-squares over all kept frames' corners: unknowns ``T_A_B`` and each ``T_cam_A`` (Huber loss,
+        analytic Jacobian, all frames projected at once: :mod:`.joint`).
 
         Frames whose RMS after the adjustment stands out (above four times the
         median and ``joint_reject_px``) do not fit one rigid ``T_A_B`` with the
@@ -317,65 +316,54 @@ class ArucoTeacher(Teacher):
             obj_b = np.concatenate([o.object_points for o in r.obs_b if o.marker_id in r.pose_b.marker_ids])
             img_b = np.concatenate([o.corners_px for o in r.obs_b if o.marker_id in r.pose_b.marker_ids])
             data.append((obj_a, img_a, obj_b, img_b))
-
-        def pack(T: np.ndarray) -> np.ndarray:
-            return np.concatenate([cv2.Rodrigues(np.ascontiguousarray(T[:3, :3]))[0].ravel(), T[:3, 3]])
-
-        def unpack(x: np.ndarray) -> np.ndarray:
-            return geometry.from_rotation(cv2.Rodrigues(x[:3].reshape(3, 1))[0], x[3:6])
-
-        def frame_res(T_cam_A: np.ndarray, T_ab: np.ndarray, i: int) -> np.ndarray:
-            obj_a, img_a, obj_b, img_b = data[i]
-            xa, xb = pack(T_cam_A), pack(T_cam_A @ T_ab)
-            pa = cv2.projectPoints(obj_a, xa[:3], xa[3:], K, dist)[0]
-            pb = cv2.projectPoints(obj_b, xb[:3], xb[3:], K, dist)[0]
-            return np.concatenate([(pa.reshape(-1, 2) - img_a).ravel(), (pb.reshape(-1, 2) - img_b).ravel()])
+        corners = CornerSet.build(data)
 
         # Each frame's start: A's own pose or B's pose carried to A through the fused T_A_B (flip alternatives
         # included), whichever fits both parts' corners best. A single square marker's pose can be tilted by
         # degrees or flipped while the other part's is not; starting from it traps the joint problem.
-        starts = []
+        # All candidates of all frames are scored in one vectorised projection.
+        cand: list[np.ndarray] = []
+        owner: list[int] = []
         for i, r in enumerate(frames):
-            cands = [r.pose_a.T_cam_part] + [T for T, _ in r.pose_a.alternatives]
-            cands += [T @ geometry.invert(T_A_B) for T in [r.pose_b.T_cam_part] + [T for T, _ in r.pose_b.alternatives]]
-            starts.append(min(cands, key=lambda T, i=i: float(np.sum(frame_res(T, T_A_B, i) ** 2))))
+            Ts = [r.pose_a.T_cam_part] + [T for T, _ in r.pose_a.alternatives]
+            Ts += [T @ geometry.invert(T_A_B) for T in [r.pose_b.T_cam_part] + [T for T, _ in r.pose_b.alternatives]]
+            cand += Ts
+            owner += [i] * len(Ts)
+        owner_arr = np.array(owner)
+        cost = frame_rms(corners.subset(owner), T_A_B, cand, K, dist)  # one pseudo-frame per candidate
+        starts = []
+        for i in range(len(frames)):
+            mine = np.flatnonzero(owner_arr == i)
+            starts.append(cand[int(mine[np.argmin(cost[mine])])])
         active = list(range(len(frames)))
         T0 = T_A_B
         T = T_A_B
-        rms0 = float(np.sqrt(np.mean(np.concatenate([frame_res(starts[i], T0, i) for i in active]) ** 2) * 2))
+        rms0 = _rms_all(frame_rms(corners, T0, starts, K, dist), corners)
         dropped: list[int] = []
         for _round in range(3):
             n = len(active)
-
-            def residuals(x: np.ndarray, active: list[int] = active) -> np.ndarray:
-                T_ab = unpack(x[:6])
-                return np.concatenate([frame_res(unpack(x[6 + 6 * k: 12 + 6 * k]), T_ab, i)
-                                       for k, i in enumerate(active)])
-
-            sizes = [2 * (len(data[i][1]) + len(data[i][3])) for i in active]
-            sparsity = lil_matrix((sum(sizes), 6 + 6 * n), dtype=int)
-            row = 0
-            for k, sz in enumerate(sizes):
-                sparsity[row: row + sz, 0:6] = 1
-                sparsity[row: row + sz, 6 + 6 * k: 12 + 6 * k] = 1
-                row += sz
-            x0 = np.concatenate([pack(T)] + [pack(starts[i]) for i in active])
-            sol = least_squares(residuals, x0, jac_sparsity=sparsity, loss="huber", f_scale=0.5, x_scale="jac",
-                                method="trf", max_nfev=200)
-            T = unpack(sol.x[:6])
+            sub = corners.subset(active)
+            T, poses, _nfev = adjust(sub, T, [starts[i] for i in active], K, dist, f_scale=0.5)
             for k, i in enumerate(active):
-                starts[i] = unpack(sol.x[6 + 6 * k: 12 + 6 * k])
-            per_frame = np.array([float(np.sqrt(np.mean(frame_res(starts[i], T, i) ** 2) * 2)) for i in active])
+                starts[i] = poses[k]
+            per_frame = frame_rms(sub, T, poses, K, dist)
             thr = max(4.0 * float(np.median(per_frame)), self.settings.joint_reject_px)
             bad = [i for i, e in zip(active, per_frame, strict=True) if e > thr]
             if not bad or n - len(bad) < max(2, self.settings.min_frames):
                 break
             dropped += [frames[i].index for i in bad]
             active = [i for i in active if i not in bad]
-        rms1 = float(np.sqrt(np.mean(np.concatenate([frame_res(starts[i], T, i) for i in active]) ** 2) * 2))
+        sub = corners.subset(active)
+        rms1 = _rms_all(frame_rms(sub, T, [starts[i] for i in active], K, dist), sub)
         shift = geometry.translation_distance(T, T0) * 1000.0
         note = (f"joint adjustment over {len(active)} frame(s): RMS {rms0:.3f} -> {rms1:.3f} px, "
                 f"moved T_A_B by {shift:.3f} mm")
         if dropped:
             note += f"; frame(s) {sorted(dropped)} dropped (do not fit one rigid T_A_B)"
         return T, note, [frames[i] for i in active]
+
+
+def _rms_all(per_frame: np.ndarray, cs: CornerSet) -> float:
+    """RMS over all corners (pixels) from per-frame RMS values of ``cs``'s frames."""
+    cnt = np.bincount(cs.frame, minlength=cs.n_frames)
+    return float(np.sqrt(np.sum(per_frame**2 * cnt) / np.sum(cnt)))
