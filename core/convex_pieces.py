@@ -62,31 +62,27 @@ def _interior_point(hs: np.ndarray) -> tuple[np.ndarray, float]:
     return res.x[:3], float(res.x[3])
 
 
-def _vertices(hs: np.ndarray, min_thickness: float) -> np.ndarray | None:
-    centre, radius = _interior_point(hs)
-    if radius < 0.5 * min_thickness:
-        return None
-    pts = HalfspaceIntersection(hs, centre).intersections
-    return pts[ConvexHull(pts).vertices]
-
-
 def convex_pieces(solid: SolidSpec, min_thickness: float = 1e-4) -> list[np.ndarray]:
     """Vertices ``(k, 3)`` of convex pieces whose union is the solid (part frame, metres)."""
-    pieces = [primitive_halfspaces(p) for p in solid.add]
+    # each piece: its halfspaces and an interior point (the Chebyshev centre found when it was accepted)
+    pieces = [(hs, _interior_point(hs)[0]) for hs in (primitive_halfspaces(p) for p in solid.add)]
     for cut in solid.subtract:
         C = primitive_halfspaces(cut)
-        out: list[np.ndarray] = []
-        for hs in pieces:
+        out: list[tuple[np.ndarray, np.ndarray]] = []
+        for hs, centre in pieces:
             if _interior_point(np.vstack([hs, C]))[1] < 0.5 * min_thickness:
-                out.append(hs)  # the cut misses this piece
+                out.append((hs, centre))  # the cut misses this piece
                 continue
             for row in C:
-                outside = -row  # n . x >= d
-                cand = np.vstack([hs, outside])
-                if _interior_point(cand)[1] >= 0.5 * min_thickness:
-                    out.append(cand)
+                cand = np.vstack([hs, -row])  # outside this face of the cut: n . x >= d
+                inner, radius = _interior_point(cand)
+                if radius >= 0.5 * min_thickness:
+                    out.append((cand, inner))
         pieces = out
-    result = [v for v in (_vertices(hs, min_thickness) for hs in pieces) if v is not None]
+    result = []
+    for hs, centre in pieces:
+        pts = HalfspaceIntersection(hs, centre).intersections
+        result.append(pts[ConvexHull(pts).vertices])
     return result
 
 

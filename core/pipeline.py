@@ -339,7 +339,7 @@ def _execute(run: _Run, robot: Robot, plan: Plan) -> list[np.ndarray]:
                     robot.execute(chunk)
                     if record:
                         frames.append(robot.sense_rgb())
-                trace.after_path(seg.label, seg.trajectory)
+                trace.after_path(seg.trajectory)
             elif seg.gripper is not None:
                 ev = seg.gripper
                 close = ev.action == "close"
@@ -374,7 +374,7 @@ class _ExecutionTrace:
     def _tcp(self, arm: str) -> np.ndarray:
         return self.robot.fk(arm, self.robot.current(arm))
 
-    def after_path(self, label: str, traj: Any) -> None:
+    def after_path(self, traj: Any) -> None:
         err = float(np.max(np.abs(self.robot.current(traj.arm) - np.asarray(traj.positions)[-1])))
         self.max_tracking_error = max(self.max_tracking_error, err)
 

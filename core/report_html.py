@@ -128,6 +128,15 @@ def _true_pose(det: Detection) -> np.ndarray | None:
     return None
 
 
+def _recorded_errors(det: Any, label: str, T: np.ndarray, T_true: np.ndarray) -> dict[str, Any]:
+    """:func:`pose_errors`, with distance and angle as the run recorded them (modulo the part's symmetries)."""
+    err = pose_errors(T, T_true)
+    rec = det.details.get(f"{label}_error") or {}
+    err["pos_mm"] = rec.get("position_mm", err["pos_mm"])
+    err["rot_deg"] = rec.get("angle_deg", err["rot_deg"])
+    return err
+
+
 def pose_errors(T_est: np.ndarray, T_true: np.ndarray) -> dict[str, Any]:
     """Errors of an estimated pose against the true one (both ``T_world_part``, metres).
 
@@ -252,10 +261,9 @@ def _detections_section(report: RunReport) -> str:
             xyz, rpy = _pose_text(T)
             err_pos = err_rot = ""
             if T_true is not None:
-                err = pose_errors(T, T_true)
-                rec = det.details.get(f"{label}_error") or {}  # measured modulo the part's symmetries
-                err_pos = f"{rec.get('position_mm', err['pos_mm']):.2f} ({_vec(err['dxyz_mm'])})"
-                err_rot = f"{rec.get('angle_deg', err['rot_deg']):.2f}"
+                err = _recorded_errors(det, label, T, T_true)
+                err_pos = f"{err['pos_mm']:.2f} ({_vec(err['dxyz_mm'])})"
+                err_rot = f"{err['rot_deg']:.2f}"
             note = []
             if label == "rough" and det.fitness is not None:
                 note.append(f"fitness {det.fitness:.3f}")
@@ -368,11 +376,8 @@ def format_summary(report: RunReport) -> str:
             T_true = _true_pose(det)
             err = ""
             if T_true is not None:
-                e = pose_errors(T, T_true)
-                key = "corrected_error" if det.corrected is not None else "rough_error"
-                rec = det.details.get(key) or {}  # measured modulo the part's symmetries
-                err = (f"  error {rec.get('position_mm', e['pos_mm']):.2f} mm / "
-                       f"{rec.get('angle_deg', e['rot_deg']):.2f} deg")
+                e = _recorded_errors(det, "corrected" if det.corrected is not None else "rough", T, T_true)
+                err = f"  error {e['pos_mm']:.2f} mm / {e['rot_deg']:.2f} deg"
             lines.append(f"  {det.part}: [{xyz}] mm{err}")
     if report.metrics:
         lines.append("metrics:")

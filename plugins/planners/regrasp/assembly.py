@@ -390,15 +390,15 @@ def _realise(
         # 0. the other arms go home (the grasp graph was screened with them there) and stay put
         robot.attach(arm, None)
         _set_world(robot, world, Obstacle(part.name, part.mesh, T_part))
-        robot.set_configuration(arm, q_cur[arm])
+        for a in robot.arms:
+            robot.set_configuration(a, q_cur[a])
         for other in robot.arms:
             if other != arm and not np.allclose(q_cur[other], robot.home(other)):
-                robot.set_configuration(other, q_cur[other])
                 path = _free(robot, planner, other, q_cur[other], robot.home(other), settings, (into, pick),
                              f"{other} arm home before the {arm} arm picks", clearances)
                 steps.append(Step(f"{other} arm home", "path", other, path))
                 q_cur[other] = robot.home(other)
-            robot.set_configuration(other, q_cur[other])
+                robot.set_configuration(other, q_cur[other])
         # 1. free motion to the pre-grasp pose; the part is an obstacle where it lies
         T_grasp = slot_pick.T_world_part @ variant_tcp(grasps, vid)
         pre = robot.ik(arm, approach_offset(T_grasp, settings.pregrasp_distance), q_seed=G.nodes[pick]["q"])

@@ -55,6 +55,10 @@ the table and closes the 0.5 mm clearance of a peg in its hole; even 0.02 mm mar
 its hole's axis jam on the rim, while exact convex pieces collide robustly without one."""
 
 
+_EXACT_OBJ: dict[str, str] = {}
+"""OBJ text of a parametric part's exact convex pieces, by part hash."""
+
+
 def _pose_to_pb(T: np.ndarray) -> tuple[list[float], list[float]]:
     return T[:3, 3].tolist(), geometry.to_quat(T).tolist()
 
@@ -107,7 +111,7 @@ class PyBulletWorld:
         self.parts: dict[str, tuple[int, PartModel]] = {}
         self.constraints: dict[str, tuple[int, str]] = {}  # arm -> (constraint id, part name)
         self._tmp = tempfile.TemporaryDirectory(prefix="asmteach-pb-")
-        self._vhacd_cache: dict[str, str] = {}
+        self._shape_files: dict[str, str] = {}
 
     # ------------------------------------------------------------ robot state
     def joint_ids(self, names: list[str]) -> list[int]:
@@ -164,15 +168,19 @@ class PyBulletWorld:
             # Exact convex pieces: V-HACD fills sub-millimetre clearances and inflates faces.
             # PyBullet makes one convex hull per object of an OBJ file, as it does for V-HACD's output.
             key = f"{part.source_hash or id(mesh)}_exact"
-            if key not in self._vhacd_cache:
+            if key not in self._shape_files:
+                # shared by every world of the process (plan re-checks make many); only content-hashed parts
+                text = _EXACT_OBJ.get(part.source_hash) or pieces_obj(convex_pieces(part.spec.solid))
+                if part.source_hash:
+                    _EXACT_OBJ[part.source_hash] = text
                 out = Path(self._tmp.name) / f"{key}.obj"
-                out.write_text(pieces_obj(convex_pieces(part.spec.solid)))
-                self._vhacd_cache[key] = str(out)
-            return self.p.createCollisionShape(pybullet.GEOM_MESH, fileName=self._vhacd_cache[key])
+                out.write_text(text)
+                self._shape_files[key] = str(out)
+            return self.p.createCollisionShape(pybullet.GEOM_MESH, fileName=self._shape_files[key])
         if mesh.is_convex:
             return self.p.createCollisionShape(pybullet.GEOM_MESH, vertices=np.asarray(mesh.vertices).tolist())
         key = part.source_hash or str(id(mesh))
-        if key not in self._vhacd_cache:
+        if key not in self._shape_files:
             src = Path(self._tmp.name) / f"{key}.obj"
             out = Path(self._tmp.name) / f"{key}_vhacd.obj"
             mesh.export(src)
@@ -180,8 +188,8 @@ class PyBulletWorld:
             with silenced_c_stdout():  # V-HACD prints progress on the C stdout
                 self.p.vhacd(str(src), str(out), str(Path(self._tmp.name) / "vhacd.log"), resolution=200000,
                              concavity=0.0005, maxNumVerticesPerCH=64, minVolumePerCH=1e-7)
-            self._vhacd_cache[key] = str(out)
-        return self.p.createCollisionShape(pybullet.GEOM_MESH, fileName=self._vhacd_cache[key])
+            self._shape_files[key] = str(out)
+        return self.p.createCollisionShape(pybullet.GEOM_MESH, fileName=self._shape_files[key])
 
     def spawn_part(self, name: str, part: PartModel, T_world_part: np.ndarray) -> int:
         """Add ``part`` at ``T_world_part`` (its mesh frame), with its mass and centre of mass."""
