@@ -308,6 +308,16 @@ class Robot(Plugin):
     def ik(self, arm: str, T_world_tcp: np.ndarray, q_seed: np.ndarray | None = None) -> IKResult:
         """Solve for ``q`` with ``fk(arm, q) == T_world_tcp``; never raises on failure."""
 
+    def ik_many(self, arm: str, T_world_tcp: np.ndarray, q_seed: np.ndarray | None = None) -> list[IKResult]:
+        """:meth:`ik` of ``(n, 4, 4)`` targets; ``q_seed`` is one ``(dof,)`` seed or ``(n, dof)`` seeds.
+
+        Planners screen hundreds of grasps this way; robots with a batched
+        solver override it (the default solves one target after the other).
+        """
+        T = np.asarray(T_world_tcp, float).reshape(-1, 4, 4)
+        seeds = [None] * len(T) if q_seed is None else np.broadcast_to(q_seed, (len(T), np.shape(q_seed)[-1]))
+        return [self.ik(arm, t, s) for t, s in zip(T, seeds, strict=True)]
+
     # -- collision
     @abc.abstractmethod
     def set_obstacles(self, obstacles: Sequence[Obstacle]) -> None:
@@ -325,8 +335,12 @@ class Robot(Plugin):
         """
 
     @abc.abstractmethod
-    def clearance(self, arm: str, qs: np.ndarray) -> np.ndarray:
-        """Batch distance (metres) from the arm, hand and held part to the world; ``(n,)``."""
+    def clearance(self, arm: str, qs: np.ndarray, upto: float = np.inf) -> np.ndarray:
+        """Batch distance (metres) from the arm, hand and held part to the world; ``(n,)``.
+
+        Distances of ``upto`` or more may come back as ``upto`` (a cost map
+        that is flat beyond some clearance need not pay for exact large ones).
+        """
 
     def collision_report(self, arm: str, q: np.ndarray) -> list[tuple[str, str]]:
         """Pairs ``(robot link, obstacle)`` in contact at ``q``; for error messages."""

@@ -67,7 +67,7 @@ class ToyRobot(I.Robot):
     def set_obstacles(self, obstacles): pass
     def attach(self, arm, part, T_tcp_part=None): pass
     def in_collision(self, arm, qs, *, ignore=()): return np.zeros(len(qs), bool)
-    def clearance(self, arm, qs): return np.ones(len(qs))
+    def clearance(self, arm, qs, upto=np.inf): return np.ones(len(qs))
 
 
 class ToyAssembly(I.AssemblyPlanner):

@@ -37,6 +37,7 @@ from asmteach.plugins.planners.regrasp.feasibility import (
     ScreenSettings,
     approach_offset,
     evaluate_slot,
+    evaluate_slots,
     screen_slot,
     variant_tcp,
     world_collider,
@@ -252,11 +253,10 @@ def plan_transfer(
             _set_world(robot, world)  # a failed realisation may have left other obstacles or a held part
             for arm in arms:
                 robot.attach(arm, None)
-            for slot, screened in zip(slots, screens, strict=True):
-                own = {g.id for g in screened[0]}
-                counts = {gid: n - (gid in own) for gid, n in total.items()}  # other slots passing it
-                layers.append(evaluate_slot(robot, slot, screened, arms, settings=screen, prefer=prefer,
-                                            shared=counts, seeds=seeds))
+            shared = [{gid: n - (gid in {g.id for g in passed}) for gid, n in total.items()}
+                      for passed, _ in screens]  # per slot: the other slots passing each grasp
+            layers += evaluate_slots(robot, slots, screens, arms, settings=screen, prefer=prefer, shared=shared,
+                                     seeds=seeds)
             stats["feasible"]["middle"] = sum(len(f.solutions) for f in layers[2:])
             G = build_regrasp_graph(
                 layers, regrasp_penalty=settings.regrasp_penalty, motion_weight=settings.motion_weight
@@ -336,12 +336,14 @@ class _Checker:
             lambda q: not bool(robot.in_collision(arm, np.asarray(q, float)[None, :])[0]),
             lambda qs: ~np.asarray(robot.in_collision(arm, qs), bool),
         )
+        # T-RRT climbs this cost map: high within a few mm of obstacles, flat beyond 10 cm (metres),
+        # so clearances beyond 10 cm need not be measured exactly.
+        cap = 0.10
         clearance = batched(
-            lambda q: float(robot.clearance(arm, np.asarray(q, float)[None, :])[0]),
-            lambda qs: np.asarray(robot.clearance(arm, qs), float),
+            lambda q: float(robot.clearance(arm, np.asarray(q, float)[None, :], upto=cap)[0]),
+            lambda qs: np.asarray(robot.clearance(arm, qs, upto=cap), float),
         )
-        # T-RRT climbs this cost map: high within a few mm of obstacles, flat beyond 10 cm (metres).
-        self.cost = inverse_clearance_cost(clearance, floor=0.005, cap=0.10)
+        self.cost = inverse_clearance_cost(clearance, floor=0.005, cap=cap)
 
     def first_hit(self, path: np.ndarray, ignore: Sequence[str] = ()) -> int | None:
         hits = self.robot.in_collision(self.arm, np.asarray(path, float), ignore=ignore)

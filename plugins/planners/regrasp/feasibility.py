@@ -37,6 +37,7 @@ __all__ = [
     "ScreenSettings",
     "approach_offset",
     "evaluate_slot",
+    "evaluate_slots",
     "screen_slot",
     "variant_id",
     "variant_tcp",
@@ -119,53 +120,96 @@ def evaluate_slot(
     shared: dict[int, int] | None = None,
     seeds: dict[str, np.ndarray] | None = None,
 ) -> GraspFeasibility:
-    """IK and collision of the best screened grasps (:func:`screen_slot`) with the part at ``slot``.
+    """:func:`evaluate_slots` of one slot."""
+    return evaluate_slots(robot, [slot], [screened], arms, settings=settings, prefer=prefer,
+                          shared=None if shared is None else [shared], seeds=seeds)[0]
 
-    The robot's obstacles must already hold the world for this slot (the
+
+def evaluate_slots(
+    robot: Robot,
+    slots: Sequence[PoseSlot],
+    screened: Sequence[tuple[list[Grasp], dict[int, str]]],
+    arms: Sequence[str],
+    *,
+    settings: ScreenSettings,
+    prefer: Iterable[int] = (),
+    shared: Sequence[dict[int, int]] | None = None,
+    seeds: dict[str, np.ndarray] | None = None,
+) -> list[GraspFeasibility]:
+    """IK and collision of the best screened grasps (:func:`screen_slot`) with the part at each slot.
+
+    The robot's obstacles must already hold the world of these slots (the
     other part; the robot knows the table) and nothing may be held; the part
     itself is not an obstacle, since the fingers touch it by design. Every arm is
-    tried (nearest first) and each that works is kept. ``prefer`` lists grasp
-    ids (not variants) to try before the others; ``shared`` counts, per grasp
-    id, the other slots where it passes the screen (grasps usable at more
-    slots are tried first, since only shared grasps make edges). Solutions are keyed by
-    ``(variant_id, arm)``; rejections keep their reason, keyed the same way
-    with ``arm = ""`` for grasps screened out before IK.
+    tried and each that works is kept. ``prefer`` lists grasp ids (not
+    variants) to try before the others; ``shared[k]`` counts, per grasp id, the
+    other slots where it passes the screen (grasps usable at more slots are
+    tried first, since only shared grasps make edges). ``seeds`` holds one IK
+    seed per arm. All targets of an arm go to :meth:`Robot.ik_many` at once.
+    Solutions are keyed by ``(variant_id, arm)``; rejections keep their
+    reason, keyed the same way with ``arm = ""`` for grasps screened out before IK.
     """
-    passed, screened_out = list(screened[0]), screened[1]
-    rejected: dict[tuple[int, str], str] = {(variant_id(gid, False), ""): r for gid, r in screened_out.items()}
     first = set(prefer)
-    counts = shared or {}
-    passed.sort(key=lambda g: (g.id not in first, -counts.get(g.id, 0), -g.score))
-    for g in passed[settings.max_candidates :]:
-        rejected[(variant_id(g.id, False), "")] = "screen: beyond the candidate cap"
-    solutions: dict[tuple[int, str], np.ndarray] = {}
-    centre = slot.T_world_part[:3, 3]
-    order = sorted(arms, key=lambda a: float(np.linalg.norm(robot.fk(a, robot.home(a))[:3, 3] - centre)))
-    for g in passed[: settings.max_candidates]:
-        T_tcp = slot.T_world_part @ g.T_part_tcp
-        # every arm: a transfer edge needs the same grasp *and* arm at both slots
-        for arm in order:
-            seed = None if seeds is None else seeds.get(arm)
-            res = robot.ik(arm, T_tcp, q_seed=seed)
-            flipped = bool(getattr(res, "flipped", False))
-            key = (variant_id(g.id, flipped), arm)
-            if not res.success or res.q is None:
-                rejected[key] = f"ik: {res.reason or 'no solution'}"
-                continue
-            q = np.asarray(res.q, float)
-            if bool(robot.in_collision(arm, q[None, :])[0]):
+    out: list[GraspFeasibility] = []
+    jobs: list[tuple[int, Grasp]] = []  # (slot index, grasp) solved by IK
+    for k, (slot, (passed, screened_out)) in enumerate(zip(slots, screened, strict=True)):
+        counts = shared[k] if shared is not None else {}
+        order = sorted(passed, key=lambda g: (g.id not in first, -counts.get(g.id, 0), -g.score))
+        rejected: dict[tuple[int, str], str] = {(variant_id(gid, False), ""): r for gid, r in screened_out.items()}
+        for g in order[settings.max_candidates :]:
+            rejected[(variant_id(g.id, False), "")] = "screen: beyond the candidate cap"
+        out.append(GraspFeasibility(slot=slot, solutions={}, rejected=rejected))
+        jobs += [(k, g) for g in order[: settings.max_candidates]]
+    if not jobs:
+        return out
+    T_tcp = np.stack([slots[k].T_world_part @ g.T_part_tcp for k, g in jobs])
+    for arm in arms:
+        seed = None if seeds is None else seeds.get(arm)
+        res = robot.ik_many(arm, T_tcp, seed)
+        keys = [(variant_id(g.id, bool(r.flipped)), arm) for (_, g), r in zip(jobs, res, strict=True)]
+        good = [i for i, r in enumerate(res) if r.success and r.q is not None]
+        for i, r in enumerate(res):
+            if not (r.success and r.q is not None):
+                out[jobs[i][0]].rejected[keys[i]] = f"ik: {r.reason or 'no solution'}"
+        good = _collision_free(robot, arm, good, [res[i].q for i in good], out, jobs, keys, "")
+        if not good:
+            continue
+        T_eff = np.stack([T_tcp[i] @ FLIP_Z if res[i].flipped else T_tcp[i] for i in good])
+        pre_T = np.stack([approach_offset(T, settings.pregrasp_distance) for T in T_eff])
+        pre = robot.ik_many(arm, pre_T, np.stack([res[i].q for i in good]))
+        reach = []
+        for i, p in zip(good, pre, strict=True):
+            if not p.success or p.q is None or p.flipped:
+                out[jobs[i][0]].rejected[keys[i]] = "ik: pre-grasp pose unreachable"
+            else:
+                reach.append((i, p.q))
+        clear = _collision_free(robot, arm, [i for i, _ in reach], [q for _, q in reach], out, jobs, keys,
+                                "at the pre-grasp pose")
+        for i in clear:
+            out[jobs[i][0]].solutions[keys[i]] = np.asarray(res[i].q, float)
+    return out
+
+
+def _collision_free(
+    robot: Robot,
+    arm: str,
+    idx: list[int],
+    qs: list[np.ndarray],
+    out: list[GraspFeasibility],
+    jobs: list[tuple[int, Grasp]],
+    keys: list[tuple[int, str]],
+    where: str,
+) -> list[int]:
+    """The entries of ``idx`` whose configuration is free; the others get a collision reason."""
+    if not idx:
+        return []
+    hits = np.asarray(robot.in_collision(arm, np.asarray(qs, float)), bool)
+    for i, q, hit in zip(idx, qs, hits, strict=True):
+        if hit:
+            if where:
+                out[jobs[i][0]].rejected[keys[i]] = f"collision: {where}"
+            else:
                 pairs = robot.collision_report(arm, q)
-                rejected[key] = "collision: " + (", ".join(f"{a}/{b}" for a, b in pairs) or "unknown pair")
-                continue
-            T_eff = T_tcp @ FLIP_Z if flipped else T_tcp
-            pre = robot.ik(arm, approach_offset(T_eff, settings.pregrasp_distance), q_seed=q)
-            if not pre.success or pre.q is None or bool(getattr(pre, "flipped", False)):
-                rejected[key] = "ik: pre-grasp pose unreachable"
-                continue
-            if bool(robot.in_collision(arm, np.asarray(pre.q, float)[None, :])[0]):
-                rejected[key] = "collision: at the pre-grasp pose"
-                continue
-            solutions[key] = q
-            if seeds is not None:
-                seeds[arm] = q
-    return GraspFeasibility(slot=slot, solutions=solutions, rejected=rejected)
+                out[jobs[i][0]].rejected[keys[i]] = "collision: " + (
+                    ", ".join(f"{a}/{b}" for a, b in pairs) or "unknown pair")
+    return [i for i, hit in zip(idx, hits, strict=True) if not hit]

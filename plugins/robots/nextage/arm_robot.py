@@ -22,6 +22,7 @@ from pydantic import Field
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import IKResult, Obstacle, PartModel, Robot
 from asmteach.core.models import HandSpec, Plan, StrictModel, TablePlane, Trajectory
+from asmteach.plugins.robots.nextage.batch_ik import ik_many
 from asmteach.plugins.robots.nextage.collision import CollisionChecker
 from asmteach.plugins.robots.nextage.kinematics import IKSettings, Kinematics
 from asmteach.plugins.robots.nextage.plan_check import CheckedArm, PlanCheck, recheck_plan
@@ -150,6 +151,13 @@ class ArmRobot(Robot):
             return IKResult(False, None, reason=f"unknown arm {arm!r}; this robot has {self.arms}")
         return self.kin.ik(arm, T_world_tcp, q_seed if q_seed is not None else self.current(arm), rng=self._ik_rng)
 
+    def ik_many(self, arm: str, T_world_tcp: np.ndarray, q_seed: np.ndarray | None = None) -> list[IKResult]:
+        if arm not in self._arms:
+            return [IKResult(False, None, reason=f"unknown arm {arm!r}; this robot has {self.arms}")
+                    for _ in np.asarray(T_world_tcp).reshape(-1, 4, 4)]
+        return ik_many(self.kin, arm, T_world_tcp, q_seed if q_seed is not None else self.current(arm),
+                       rng=self._ik_rng)
+
     # ------------------------------------------------------------ collision
     def set_obstacles(self, obstacles: Sequence[Obstacle]) -> None:
         self.checker.set_obstacles(obstacles)
@@ -162,9 +170,9 @@ class ArmRobot(Robot):
         self._arm(arm)
         return self.checker.in_collision(arm, qs, ignore=ignore)
 
-    def clearance(self, arm: str, qs: np.ndarray) -> np.ndarray:
+    def clearance(self, arm: str, qs: np.ndarray, upto: float = np.inf) -> np.ndarray:
         self._arm(arm)
-        return self.checker.clearance(arm, qs)
+        return self.checker.clearance(arm, qs, upto)
 
     def collision_report(self, arm: str, q: np.ndarray) -> list[tuple[str, str]]:
         self._arm(arm)

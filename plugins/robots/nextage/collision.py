@@ -319,27 +319,60 @@ class CollisionChecker:
         pairs = [(objs[A[p]].link, objs[B[p]].link) for p in pi[hit]]
         return sorted(set(pairs))
 
-    def clearance(self, arm: str, qs: np.ndarray) -> np.ndarray:
+    def clearance(self, arm: str, qs: np.ndarray, upto: float = np.inf) -> np.ndarray:
         """``(n,)`` minimum distance (metres, 0 when touching) from the moving robot geometry and the
-        held part to the table and the obstacles."""
+        held part to the table and the obstacles; distances of ``upto`` or more come back as ``upto``.
+
+        Every pair gets a lower bound from its two OBBs (the separation along
+        either box's face normals); pairs are measured with fcl in order of that
+        bound, until the bound reaches the smallest distance found (or ``upto``).
+        Most pairs of a free configuration are never measured.
+        """
         qs = np.atleast_2d(self.kin.check_limits(arm, qs))
         objs, _, _, _ = self._pair_set(arm, ())
         moving_j = set(self.kin.moving_joints(arm))
-        mov = [k for k, g in enumerate(objs) if g.joint in moving_j and g.joint >= 0]
-        world = [k for k, g in enumerate(objs) if g.joint < 0]
+        mov = np.array([k for k, g in enumerate(objs) if g.joint in moving_j and g.joint >= 0], dtype=int)
+        world = np.array([k for k, g in enumerate(objs) if g.joint < 0], dtype=int)
+        out = np.full(qs.shape[0], float(upto))
+        if mov.size == 0 or world.size == 0:
+            return out
         poses = self._poses(arm, qs, objs)
-        out = np.full(qs.shape[0], np.inf)
+        W = poses @ np.stack([g.obb for g in objs])[None]  # OBB frames in the world, (n, objs, 4, 4)
+        half = np.stack([g.half for g in objs])
+        lb = np.maximum(_obb_gap(W[:, mov], half[mov], W[:, world], half[world]),
+                        _obb_gap(W[:, world], half[world], W[:, mov], half[mov]).transpose(0, 2, 1))
+        pair_m, pair_w = np.meshgrid(mov, world, indexing="ij")
+        pair_m, pair_w = pair_m.ravel(), pair_w.ravel()
+        lb = np.maximum(lb.reshape(qs.shape[0], -1), 0.0)
         req = fcl.DistanceRequest()
         for i in range(qs.shape[0]):
-            for k in mov:
-                objs[k].fcl_obj.setTransform(_tf(poses[i, k]))
-            best = np.inf
-            for k in mov:
-                for w in world:
-                    dist = fcl.distance(objs[k].fcl_obj, objs[w].fcl_obj, req, fcl.DistanceResult())
-                    best = min(best, max(0.0, float(dist)))
+            best = float(upto)
+            for p in np.argsort(lb[i]):
+                if lb[i, p] >= best:
+                    break
+                ga, gb = objs[pair_m[p]], objs[pair_w[p]]
+                ga.fcl_obj.setTransform(_tf(poses[i, pair_m[p]]))
+                gb.fcl_obj.setTransform(_tf(poses[i, pair_w[p]]))
+                best = min(best, max(0.0, float(fcl.distance(ga.fcl_obj, gb.fcl_obj, req, fcl.DistanceResult()))))
+                if best <= 0.0:
+                    break
             out[i] = best
         return out
+
+
+def _obb_gap(Wa: np.ndarray, half_a: np.ndarray, Wb: np.ndarray, half_b: np.ndarray) -> np.ndarray:
+    """``(n, A, B)`` separation (metres; negative: none) of OBBs A from OBBs B along B's face normals.
+
+    ``Wa`` ``(n, A, 4, 4)`` and ``Wb`` ``(n, B, 4, 4)`` are the OBB frames in the world,
+    ``half_*`` their half extents. A plane through a face of B with all of A
+    outside it separates them, so the largest such gap bounds their distance from below.
+    """
+    signs = np.array(np.meshgrid([-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], indexing="ij")).reshape(3, -1).T  # (8, 3)
+    corners = Wa[:, :, None, :3, 3] + np.einsum("naij,aj,cj->naci", Wa[..., :3, :3], half_a, signs)  # (n, A, 8, 3)
+    rel = corners[:, :, None] - Wb[:, None, :, None, :3, 3]  # (n, A, B, 8, 3)
+    s = np.einsum("nabcj,nbjk->nabck", rel, Wb[..., :3, :3])  # along B's axes
+    h = half_b[None, None, :, :]
+    return np.max(np.maximum(s.min(axis=3) - h, -s.max(axis=3) - h), axis=3)
 
 
 def _tf(T: np.ndarray) -> fcl.Transform:

@@ -54,6 +54,9 @@ class IKSettings(StrictModel):
     tol_rot: float = Field(1e-4, gt=0.0, description="orientation tolerance, radians")
     max_iters: int = Field(60, ge=1, description="iterations per start")
     max_starts: int = Field(40, ge=1, description="seed, home, then random starts")
+    batch_starts: int = Field(
+        4, ge=1, description="starts per target when many targets are solved at once (random ones only for "
+        "targets that neither the seed nor the home reach)")
     damping: float = Field(1e-6, gt=0.0, description="DLS damping lambda^2 (m^2)")
     max_step: float = Field(0.4, gt=0.0, description="largest joint step per iteration, radians")
     try_flipped: bool = Field(True, description="for grasps, also try the TCP turned 180 deg about z")

@@ -82,3 +82,38 @@ def test_batch_equals_single_and_clearance(robot: NextagePyBullet) -> None:
     lower = home.copy()
     lower[4] += 0.1
     assert robot.clearance("right", lower[None])[0] != pytest.approx(c, abs=1e-6)
+
+
+def test_pruned_clearance_equals_every_pair_measured(robot: NextagePyBullet) -> None:
+    import fcl
+
+    from asmteach.plugins.robots.nextage.collision import _tf
+
+    block = trimesh.creation.box((0.08, 0.06, 0.05))
+    T = np.eye(4)
+    T[:3, 3] = (0.38, -0.12, 0.025)
+    robot.set_obstacles([Obstacle("block", block, T)])
+    held = np.eye(4)
+    held[2, 3] = 0.05
+    spec = PartSpec(name="peg", solid=SolidSpec(add=[Primitive(shape="cylinder", radius=0.01, height=0.06)]))
+    peg = PartModel(spec=spec, mesh=trimesh.creation.cylinder(0.01, 0.06), mass=0.05, center_of_mass=np.zeros(3))
+    robot.attach("right", peg, held)
+    lo, hi = robot.joint_limits("right")
+    qs = np.random.default_rng(4).uniform(lo, hi, size=(120, 6))
+    qs = qs[~robot.in_collision("right", qs)][:40]
+    ch = robot.checker
+    objs, *_ = ch._pair_set("right", ())
+    moving = set(ch.kin.moving_joints("right"))
+    mov = [k for k, g in enumerate(objs) if g.joint in moving and g.joint >= 0]
+    world = [k for k, g in enumerate(objs) if g.joint < 0]
+    poses = ch._poses("right", qs, objs)
+    brute = []
+    for i in range(len(qs)):
+        for k in mov + world:
+            objs[k].fcl_obj.setTransform(_tf(poses[i, k]))
+        brute.append(min(max(0.0, fcl.distance(objs[a].fcl_obj, objs[b].fcl_obj, fcl.DistanceRequest(),
+                                               fcl.DistanceResult())) for a in mov for b in world))
+    brute = np.array(brute)
+    assert len(qs) > 20 and brute.min() < 0.1 < brute.max()
+    assert np.allclose(robot.clearance("right", qs), brute, atol=1e-12)
+    assert np.allclose(robot.clearance("right", qs, upto=0.1), np.minimum(brute, 0.1), atol=1e-12)

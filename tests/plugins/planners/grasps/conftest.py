@@ -102,8 +102,8 @@ class PointArm(Robot):
     def in_collision(self, arm: str, qs: np.ndarray, *, ignore: Sequence[str] = ()) -> np.ndarray:
         return np.array([bool(self._hits(q)) for q in np.atleast_2d(qs)])
 
-    def clearance(self, arm: str, qs: np.ndarray) -> np.ndarray:
-        return np.full(len(np.atleast_2d(qs)), 1.0)
+    def clearance(self, arm: str, qs: np.ndarray, upto: float = np.inf) -> np.ndarray:
+        return np.full(len(np.atleast_2d(qs)), min(1.0, upto))
 
     def collision_report(self, arm: str, q: np.ndarray) -> list[tuple[str, str]]:
         return self._hits(q)

@@ -1,0 +1,233 @@
+"""Inverse kinematics of many TCP targets at once: damped least squares vectorised in numpy.
+
+The regrasp planner asks for IK of every candidate grasp at every slot
+(hundreds of targets, most of them unreachable). Solved one by one with
+pinocchio, each failed query spent its whole iteration budget in Python (about
+10 ms); here all targets iterate together, so an iteration costs one batched
+forward kinematics (:meth:`Kinematics.batch_joint_poses`) and one batched
+6x6 solve for every target still unsolved.
+
+The algorithm is the one of :meth:`Kinematics.ik`: from the seed, then the
+arm's home, then random configurations, damped-least-squares steps (step
+capped at ``max_step`` radians, clipped to the joint limits) until the TCP is
+within ``tol_pos`` metres and ``tol_rot`` radians of the target; optionally
+the target turned 180 deg about the TCP z (the other finger order of a
+symmetric jaw) for targets that fail. Errors are taken in world axes (position
+difference and the rotation vector of ``R_target R_tcp^T``), which have the
+same fixed points as pinocchio's ``log6``.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pinocchio as pin
+from scipy.spatial.transform import Rotation
+
+from asmteach.core.interfaces import IKResult
+from asmteach.plugins.robots.nextage.kinematics import ArmChain, Kinematics, flip_jaw
+
+__all__ = ["ik_many"]
+
+
+def ik_many(
+    kin: Kinematics,
+    arm: str,
+    T_world_tcp: np.ndarray,
+    q_seed: np.ndarray | None = None,
+    *,
+    rng: np.random.Generator | None = None,
+    flipped: bool | None = None,
+) -> list[IKResult]:
+    """Solve ``fk(arm, q) == T`` for ``(n, 4, 4)`` targets (world, metres); one :class:`IKResult` each.
+
+    ``q_seed`` is one ``(dof,)`` seed for every target or ``(n, dof)`` seeds.
+    ``flipped=None`` follows ``kin.settings.try_flipped``; unlike
+    :meth:`Kinematics.ik`, a flipped solution from the seed or the home wins
+    over random starts of the pose as asked (both hold the part the same way).
+    The other joints of the robot stay at ``kin.q_full``. Never raises on
+    unreachable targets.
+    """
+    c, s = kin.chain(arm), kin.settings
+    T = np.asarray(T_world_tcp, float).reshape(-1, 4, 4)
+    n = T.shape[0]
+    rng = rng if rng is not None else np.random.default_rng(0)
+    results: list[IKResult | None] = [None] * n
+    finite = np.all(np.isfinite(T.reshape(n, -1)), axis=1)
+    for i in np.flatnonzero(~finite):
+        results[i] = IKResult(False, None, reason="the target is not a finite 4x4 pose")
+    solver = _ChainSolver(kin, c)
+    todo = np.flatnonzero(finite)
+    dist = np.linalg.norm(T[todo, :3, 3] - solver.shoulder, axis=1)
+    far = dist > c.reach * 1.001
+    for i, d in zip(todo[far], dist[far], strict=True):
+        results[i] = IKResult(False, None, residual_pos=float(d - c.reach), residual_rot=float("nan"),
+                              reason=f"target outside the workspace: {d:.3f} m from the arm's first joint, "
+                                     f"reach at most {c.reach:.3f} m")
+    todo = todo[~far]
+    if todo.size:
+        flips = (False, True) if (kin.settings.try_flipped if flipped is None else flipped) else (False,)
+        targets = np.stack([T[todo]] + ([np.stack([flip_jaw(t) for t in T[todo]])] if len(flips) > 1 else []), 1)
+        fixed = [np.broadcast_to(c.home, (todo.size, c.dof))]
+        if q_seed is not None:
+            fixed.insert(0, np.clip(np.broadcast_to(np.asarray(q_seed, float), (n, c.dof))[todo], c.lower, c.upper))
+        # the seed and the home first; random starts only for the targets they do not solve
+        ok, q, ep, er, flip = _solve_rows(solver, targets, np.stack(fixed, 1))
+        left = np.flatnonzero(~ok)
+        extra = s.batch_starts - len(fixed)
+        if left.size and extra > 0:
+            rand = rng.uniform(c.lower, c.upper, size=(left.size, extra, c.dof))
+            ok2, q2, ep2, er2, flip2 = _solve_rows(solver, targets[left], rand)
+            better = ok2 | (ep2 + 0.1 * er2 < ep[left] + 0.1 * er[left])
+            for arr, new in ((ok, ok2), (q, q2), (ep, ep2), (er, er2), (flip, flip2)):
+                arr[left[better]] = new[better]
+        for r, i in enumerate(todo):
+            if ok[r]:
+                results[i] = IKResult(True, q[r], residual_pos=float(ep[r]), residual_rot=float(er[r]),
+                                      flipped=bool(flips[flip[r]]))
+            else:
+                results[i] = IKResult(False, None, residual_pos=float(ep[r]), residual_rot=float(er[r]),
+                                      reason=f"no solution within the joint limits after {s.batch_starts} starts "
+                                             f"(best residual {ep[r] * 1000:.2f} mm, {math.degrees(er[r]):.2f} deg)")
+    return [r for r in results if r is not None]
+
+
+def _solve_rows(
+    solver: _ChainSolver, targets: np.ndarray, starts: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Targets ``(m, F, 4, 4)`` (jaw orders) from starts ``(m, K, dof)``, all rows at once.
+
+    Per target: converged, ``q``, position / rotation residual of the first
+    converged row (jaw order as asked first, then start order) or of the best
+    row of the target as asked, and the jaw-order index used.
+    """
+    m, F = targets.shape[:2]
+    K, dof = starts.shape[1:]
+    rows_T = np.repeat(targets[:, :, None], K, axis=2).reshape(-1, 4, 4)
+    rows_q = np.repeat(starts[:, None], F, axis=1).reshape(-1, dof)
+    ok, q, ep, er = solver.dls(rows_T, rows_q)
+    ok, q, ep, er = ok.reshape(m, F * K), q.reshape(m, F * K, dof), ep.reshape(m, F * K), er.reshape(m, F * K)
+    pick = np.where(ok.any(axis=1), np.argmax(ok, axis=1), np.argmin(ep[:, :K] + 0.1 * er[:, :K], axis=1))
+    r = np.arange(m)
+    return ok[r, pick], q[r, pick], ep[r, pick], er[r, pick], pick // K
+
+
+class _ChainSolver:
+    """Batched FK, Jacobian and DLS iterations of one arm, the rest of the robot at ``q_full``.
+
+    Forward kinematics walks the arm's own joints only (each one's parent is
+    the previous), from the pose of the first joint's parent.
+    """
+
+    def __init__(self, kin: Kinematics, chain: ArmChain) -> None:
+        self.s, self.c = kin.settings, chain
+        m, d = kin.model, kin.data
+        ids = chain.joint_ids
+        if any(m.parents[b] != a for a, b in itertools.pairwise(ids)):
+            raise ValueError(f"arm {chain.name!r}: joints are not consecutive in the kinematic tree")
+        frame = m.frames[m.getFrameId(chain.tcp_frame)]
+        if frame.parentJoint != ids[-1]:
+            raise ValueError(f"arm {chain.name!r}: the TCP is not fixed to the last arm joint")
+        pin.forwardKinematics(m, d, kin.q_full)
+        self.T_root = kin.T_world_base @ d.oMi[m.parents[ids[0]]].homogeneous
+        self.M = np.stack([m.jointPlacements[j].homogeneous for j in ids])
+        S = np.stack([np.asarray(d.joints[j].S).reshape(6, -1)[:, 0] for j in ids])
+        if np.any(np.linalg.norm(S[:, 3:], axis=1) < 0.5):
+            raise ValueError(f"arm {chain.name!r}: batched IK handles revolute joints only")
+        self.axis = S[:, 3:] / np.linalg.norm(S[:, 3:], axis=1, keepdims=True)
+        K = np.zeros((len(ids), 3, 3))
+        K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -self.axis[:, 2], self.axis[:, 1], -self.axis[:, 0]
+        self.K = K - np.transpose(K, (0, 2, 1))
+        self.K2 = self.K @ self.K
+        self.P_tcp = frame.placement.homogeneous
+        self.shoulder = (self.T_root @ self.M[0])[:3, 3]
+
+    def fk_jac(self, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(n, 4, 4)`` TCP poses and ``(n, 6, dof)`` world Jacobians (linear; angular)."""
+        n, dof = qs.shape
+        sn, cs = np.sin(qs)[:, :, None, None], np.cos(qs)[:, :, None, None]
+        R_q = np.eye(3) + sn * self.K + (1.0 - cs) * self.K2  # (n, dof, 3, 3)
+        R = np.broadcast_to(self.T_root[:3, :3], (n, 3, 3))
+        p = np.broadcast_to(self.T_root[:3, 3], (n, 3))
+        axes, origins = np.empty((n, dof, 3)), np.empty((n, dof, 3))
+        for k in range(dof):
+            p = p + R @ self.M[k, :3, 3]
+            R = R @ self.M[k, :3, :3]
+            axes[:, k], origins[:, k] = R @ self.axis[k], p
+            R = R @ R_q[:, k]
+        T = np.empty((n, 4, 4))
+        T[:, :3, :3] = R @ self.P_tcp[:3, :3]
+        T[:, :3, 3] = p + R @ self.P_tcp[:3, 3]
+        T[:, 3] = (0.0, 0.0, 0.0, 1.0)
+        J = np.empty((n, 6, dof))
+        J[:, :3] = np.transpose(np.cross(axes, T[:, None, :3, 3] - origins), (0, 2, 1))
+        J[:, 3:] = np.transpose(axes, (0, 2, 1))
+        return T, J
+
+    def dls(self, targets: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Damped least squares from ``q`` for every row; ``(converged, q, pos error m, rot error rad)``.
+
+        A row that has not cut its error by 10 % in ``_STALL`` iterations stops
+        early: it sits against a joint limit or in a local minimum, and another
+        start is cheaper than more steps.
+        """
+        s, c = self.s, self.c
+        n = q.shape[0]
+        q = q.copy()
+        done = np.zeros(n, bool)
+        ep, er = np.full(n, np.inf), np.full(n, np.inf)
+        best, since = np.full(n, np.inf), np.zeros(n, int)
+        active = np.arange(n)
+        eye = np.eye(6) * s.damping
+        for _ in range(s.max_iters):
+            T, J = self.fk_jac(q[active])
+            e, e_p, e_r = _log6_error(T, targets[active])
+            ep[active] = np.linalg.norm(e_p, axis=1)
+            er[active] = np.linalg.norm(e_r, axis=1)
+            conv = (ep[active] < s.tol_pos) & (er[active] < s.tol_rot)
+            done[active[conv]] = True
+            err = ep[active] + 0.1 * er[active]
+            improved = err < 0.9 * best[active]
+            best[active[improved]] = err[improved]
+            since[active] = np.where(improved, 0, since[active] + 1)
+            keep = ~conv & (since[active] < _STALL)
+            if not np.any(keep):
+                break
+            active, T, J, e = active[keep], T[keep], J[keep], e[keep]
+            Rt = np.transpose(T[:, :3, :3], (0, 2, 1))
+            J = np.concatenate([Rt @ J[:, :3], Rt @ J[:, 3:]], axis=1)  # TCP-frame twist, as the error
+            v = np.einsum("nji,nj->ni", J, np.linalg.solve(J @ np.transpose(J, (0, 2, 1)) + eye, e[:, :, None])[..., 0])
+            big = np.max(np.abs(v), axis=1)
+            v *= np.minimum(1.0, s.max_step / np.maximum(big, 1e-12))[:, None]
+            q[active] = np.clip(q[active] + v, c.lower, c.upper)
+        return done, q, ep, er
+
+
+_STALL = 8
+"""Iterations without a 10 % cut of the error before a start is abandoned."""
+
+
+
+def _log6_error(T: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``log6(T^-1 target)`` in the TCP frame, ``(n, 6)`` (linear; angular), with the plain
+    translation error ``(n, 3)`` (metres) and rotation vector ``(n, 3)`` (radians).
+
+    Steps along the screw of ``log6`` converge from more starts than steps on the
+    world position error (204 against 175 of 300 random reachable targets from
+    the Nextage's home), as in pinocchio's IK example.
+    """
+    Rt = np.transpose(T[:, :3, :3], (0, 2, 1))
+    p = np.einsum("nij,nj->ni", Rt, targets[:, :3, 3] - T[:, :3, 3])
+    w = Rotation.from_matrix(Rt @ targets[:, :3, :3]).as_rotvec()
+    th = np.linalg.norm(w, axis=1)
+    W = np.zeros((w.shape[0], 3, 3))
+    W[:, 0, 1], W[:, 0, 2], W[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
+    W = W - np.transpose(W, (0, 2, 1))
+    big = th > 1e-4
+    t = np.where(big, th, 1.0)
+    # V^-1 = I - W/2 + (1 - alpha)/theta^2 W^2, alpha = (theta/2) cot(theta/2); its limit is 1/12
+    k = np.where(big, (1.0 - 0.5 * t / np.tan(0.5 * t)) / t**2, 1.0 / 12.0)
+    v = p - 0.5 * np.einsum("nij,nj->ni", W, p) + k[:, None] * np.einsum("nij,nj->ni", W @ W, p)
+    return np.concatenate([v, w], axis=1), p, w
