@@ -324,8 +324,13 @@ class Robot(Plugin):
         """Replace the static world used for collision checking (the table is always there)."""
 
     @abc.abstractmethod
-    def attach(self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None) -> None:
-        """Attach ``part`` to ``arm``'s TCP for collision checking (``None`` detaches)."""
+    def attach(self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None, *,
+               width: float | None = None) -> None:
+        """Attach ``part`` to ``arm``'s TCP for collision checking (``None`` detaches).
+
+        ``width`` (metres) is the jaw opening while holding: the fingers are
+        checked closed on the part, where they really are (``None``: left as they are).
+        """
 
     @abc.abstractmethod
     def in_collision(self, arm: str, qs: np.ndarray, *, ignore: Sequence[str] = ()) -> np.ndarray:

@@ -65,7 +65,7 @@ class ToyRobot(I.Robot):
     def fk(self, arm, q): return np.eye(4)
     def ik(self, arm, T, q_seed=None): return I.IKResult(success=False, q=None, reason="toy")
     def set_obstacles(self, obstacles): pass
-    def attach(self, arm, part, T_tcp_part=None): pass
+    def attach(self, arm, part, T_tcp_part=None, *, width=None): pass
     def in_collision(self, arm, qs, *, ignore=()): return np.zeros(len(qs), bool)
     def clearance(self, arm, qs, upto=np.inf): return np.ones(len(qs))
 

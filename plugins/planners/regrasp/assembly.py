@@ -418,7 +418,7 @@ def _realise(
                           event=GripperEvent(arm=arm, action="close", width=grasps[vid // 2].width,
                                              attach=part.name)))
         T_tcp_now = robot.fk(arm, down[-1])
-        robot.attach(arm, part, np.linalg.inv(T_tcp_now) @ slot_pick.T_world_part)
+        robot.attach(arm, part, np.linalg.inv(T_tcp_now) @ slot_pick.T_world_part, width=grasps[vid // 2].width)
         # 3. lift straight up (the part leaves the table it touched)
         T_lift = T_tcp_now.copy()
         T_lift[2, 3] += settings.lift

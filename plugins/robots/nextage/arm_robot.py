@@ -162,9 +162,16 @@ class ArmRobot(Robot):
     def set_obstacles(self, obstacles: Sequence[Obstacle]) -> None:
         self.checker.set_obstacles(obstacles)
 
-    def attach(self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None) -> None:
+    def attach(self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None, *,
+               width: float | None = None) -> None:
         self._arm(arm)
         self.checker.attach(arm, part, T_tcp_part)
+        opened = np.asarray(self._arms[arm].gripper.open_values, float)
+        if part is None:
+            self._set_fingers(arm, opened)
+        elif width is not None:
+            # each finger's inner face sits half the opening from the TCP (as in the simulator and the re-check)
+            self._set_fingers(arm, np.minimum(opened, 0.5 * float(width)))
 
     def in_collision(self, arm: str, qs: np.ndarray, *, ignore: Sequence[str] = ()) -> np.ndarray:
         self._arm(arm)

@@ -14,7 +14,8 @@ straight joint-space lines between waypoints (as execution interpolates them);
 a ``close`` gripper event sets the fingers to half the grasp width each and,
 with ``attach``, welds that part to the arm's TCP (``T_tcp_part`` fixed at the
 moment of closing); an ``open`` event opens the fingers and leaves the part
-where it is, an obstacle from then on.
+where it is (lowered onto the table when let go within :data:`DROP_GAP` of it,
+as gravity does), an obstacle from then on.
 
 Densification: between two checked configurations no point of the robot, nor
 of a held part, moves more than ``resolution`` metres. For joint ``j`` let
@@ -176,6 +177,10 @@ def _quat_matrices(q: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- the checker
+DROP_GAP = 0.003
+"""Metres: a released part whose lowest point is at most this far above the table is put down on it."""
+
+
 @dataclass
 class _Held:
     """A part welded to an arm's TCP: its PyBullet base (centre-of-mass) frame in the TCP frame."""
@@ -354,6 +359,18 @@ class PlanChecker:
         T_tcp_com = np.linalg.solve(T_world_tcp, geometry.from_quat(quat, pos))
         return _Held(part, T_tcp_com[:3, 3].tolist(), geometry.to_quat(T_tcp_com).tolist())
 
+    def _drop_onto_table(self, part: str) -> None:
+        """A part let go just above the table falls onto it: lower it by the gap when that is under
+        :data:`DROP_GAP` (planners release parts a millimetre up so as not to push them)."""
+        body = self.world.parts[part][0]
+        near = self.p.getClosestPoints(body, self.world.table_id, DROP_GAP)
+        if not near:
+            return
+        gap = min(c[8] for c in near)
+        if gap > 0.0:
+            pos, quat = self.p.getBasePositionAndOrientation(body)
+            self.p.resetBasePositionAndOrientation(body, (pos[0], pos[1], pos[2] - gap), quat)
+
     def _set_q(self, ids: Sequence[int], q: np.ndarray) -> None:
         reset = self.p.resetJointState
         for j, v in zip(ids, q, strict=True):
@@ -487,7 +504,9 @@ class PlanChecker:
         fingers = self.world.joint_ids(list(spec.finger_joints))
         if ev.action == "open":
             self._set_q(fingers, np.asarray(spec.open_values))
-            held.pop(ev.arm, None)  # the part stays where it is, an obstacle from now on
+            h = held.pop(ev.arm, None)  # the part stays where it is, an obstacle from now on
+            if h is not None:
+                self._drop_onto_table(h.part)
             return
         half = 0.0 if ev.width is None else 0.5 * float(ev.width)
         self._set_q(fingers, np.minimum(np.asarray(spec.open_values), half))

@@ -117,3 +117,32 @@ def test_pruned_clearance_equals_every_pair_measured(robot: NextagePyBullet) -> 
     assert len(qs) > 20 and brute.min() < 0.1 < brute.max()
     assert np.allclose(robot.clearance("right", qs), brute, atol=1e-12)
     assert np.allclose(robot.clearance("right", qs, upto=0.1), np.minimum(brute, 0.1), atol=1e-12)
+
+
+def test_a_held_part_closes_the_fingers_of_the_collision_model_on_it(robot: NextagePyBullet) -> None:
+    kin = robot.kin
+    fingers = robot._arms["left"].gripper.finger_joints
+    opened = robot._arms["left"].gripper.open_values
+
+    def values() -> list[float]:
+        return [float(kin.q_full[kin.model.joints[kin.model.getJointId(j)].idx_q]) for j in fingers]
+
+    spec = PartSpec(name="cube", solid=SolidSpec(add=[Primitive(shape="box", size=[0.03, 0.03, 0.03])]))
+    cube = PartModel(spec=spec, mesh=trimesh.creation.box((0.03, 0.03, 0.03)), mass=0.05, center_of_mass=np.zeros(3))
+    T = np.eye(4)
+    T[2, 3] = 0.02
+    robot.attach("left", cube, T, width=0.03)
+    assert values() == pytest.approx([0.015, 0.015])
+    T_tcp = robot.fk("left", robot.home("left"))
+    q = robot.home("left")
+    # a thin plate (normal along the jaw axis) 10 mm beyond the closed finger's outer face (15 + 10 mm
+    # from the TCP) but through the open finger (inner face 42.5 mm out, 10 mm thick)
+    plate = trimesh.creation.box((0.2, 0.002, 0.2))
+    T_plate = T_tcp.copy()
+    T_plate[:3, 3] += T_tcp[:3, 1] * 0.047
+    robot.set_obstacles([Obstacle("plate", plate, T_plate)])
+    closed_free = not robot.in_collision("left", q[None])[0]
+    robot.attach("left", None)
+    assert values() == pytest.approx(list(opened))
+    assert closed_free and robot.in_collision("left", q[None])[0]
+    robot.set_obstacles([])

@@ -178,6 +178,26 @@ def test_a_held_box_may_touch_the_table_only_where_the_rules_allow(robot) -> Non
     assert check.collisions[0].time_s == 0.0
 
 
+def test_a_part_let_go_just_above_the_table_lands_on_it(robot) -> None:
+    # the box is put down 1 mm up (the planner's release gap), or 10 mm up (a real drop the check keeps)
+    for gap, z_after in ((0.001, 0.0), (0.010, 0.010)):
+        plan = _carry_plan(robot, width=0.04)
+        lowered = _line(robot, np.asarray(plan.segments[2].trajectory.positions)[-1], _tcp_at(robot, 0.25, 0.20,
+                                                                                               0.04 + gap))
+        plan.segments[3:] = [_segment(robot, "place box", lowered),
+                             PlanSegment(label="release box", gripper=GripperEvent(arm="left", action="open"))]
+        world = PyBulletWorld(robot.urdf, robot.T_world_base)
+        try:
+            st = robot.settings
+            checker = PlanChecker(world, _arms(robot), table_center=st.table_center, table_size=st.table_size,
+                                  table_height=0.0, skip_pairs=robot.checker.disabled)
+            assert checker.check(plan, _carry_parts(), {a: robot.home(a) for a in robot.arms}).ok
+            pos, _ = world.p.getBasePositionAndOrientation(world.parts["box"][0])
+            assert pos[2] - 0.03 == pytest.approx(z_after, abs=2e-4)  # the base frame is the box's centre
+        finally:
+            world.close()
+
+
 def test_densification_keeps_every_point_within_the_resolution_on_a_fast_swing(robot) -> None:
     world = PyBulletWorld(robot.urdf, robot.T_world_base)
     try:
