@@ -167,9 +167,11 @@ def evaluate_slots(
         seed = None if seeds is None else seeds.get(arm)
         res = robot.ik_many(arm, T_tcp, seed)
         keys = [(variant_id(g.id, bool(r.flipped)), arm) for (_, g), r in zip(jobs, res, strict=True)]
-        good = [i for i, r in enumerate(res) if r.success and r.q is not None]
+        good = []
         for i, r in enumerate(res):
-            if not (r.success and r.q is not None):
+            if r.success and r.q is not None:
+                good.append(i)
+            else:
                 out[jobs[i][0]].rejected[keys[i]] = f"ik: {r.reason or 'no solution'}"
         good = _collision_free(robot, arm, good, [res[i].q for i in good], out, jobs, keys, "")
         if not good:
