@@ -393,6 +393,7 @@ class PlanSegment(StrictModel):
     label: str
     trajectory: Trajectory | None = None
     gripper: GripperEvent | None = None
+    part: str | None = Field(None, description="the part this step moves or serves (None: not said)")
 
 
 class Plan(StrictModel):

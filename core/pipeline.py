@@ -45,6 +45,11 @@ class ExecutionSettings(StrictModel):
     success_angle_deg: float = Field(2.0, gt=0.0, description="B in A: rotation tolerance")
     success_a_goal_mm: float = Field(3.0, gt=0.0, description="A at its goal: position tolerance")
     recheck_plan: bool = Field(True, description="re-check the plan with the robot's independent collision check")
+    look_again: bool = Field(
+        True,
+        description="when A's detection is ambiguous, detect A again once placed and plan again if it is not at "
+        "its goal (it was the other twin)",
+    )
 
 
 class StageFailed(Exception):
@@ -179,7 +184,13 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, *, pm: Any | None = None) -> Run
         detections = _detect(run, robot, (part_a, part_b), table, truth)
         grasps = _grasps(run, robot, part_a, part_b)
         result = _plan(run, robot, learned, part_a, part_b, detections, grasps, table)
-        frames = _execute(run, robot, result.plan)
+        plan, frames = result.plan, []
+        head = list(itertools.takewhile(lambda seg: seg.part == part_a.name, plan.segments))
+        if run.execution.look_again and head and detections[part_a.name].details.get("ambiguous"):
+            frames += _execute(run, robot, Plan(segments=head), stage="execute_a")
+            result, plan = _look_again(run, robot, learned, (part_a, part_b), detections, grasps, table, result,
+                                       Plan(segments=plan.segments[len(head):], stats=plan.stats))
+        frames += _execute(run, robot, plan)
         if frames:
             _write_animation(run, frames)
         _measure(run, robot, learned, true_task, part_a, part_b, result)
@@ -230,11 +241,7 @@ def _detect(run: _Run, robot: Robot, parts: tuple[PartModel, ...], table: TableP
     with run.stage("detect", total=len(parts)) as d:
         detector = run.plugin("detector")
         corrector = run.plugin("corrector") if run.cfg.corrector is not None else None
-        depth, cloud = robot.sense_depth()
-        try:
-            viewpoint = robot.camera_pose()[:3, 3]
-        except NotImplementedError:
-            viewpoint = None
+        depth, cloud, viewpoint = _sense(robot)
         np.save(run.out / "depth.npy", depth.astype(np.float32))
         out: dict[str, Detection] = {}
         for part in parts:
@@ -267,6 +274,16 @@ def _detect(run: _Run, robot: Robot, parts: tuple[PartModel, ...], table: TableP
         path = detection_figure(run.out / "detection.png", depth, cloud, parts, out, truth)
         run.artefact("detection", path, "png")
         return out
+
+
+def _sense(robot: Robot) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """``(depth image, cloud (n, 3) world frame, camera centre or None)`` from the robot's depth camera."""
+    depth, cloud = robot.sense_depth()
+    try:
+        viewpoint = robot.camera_pose()[:3, 3]
+    except NotImplementedError:
+        viewpoint = None
+    return depth, cloud, viewpoint
 
 
 def _segment_near(cloud: np.ndarray, part: PartModel, T: np.ndarray, radius: float = 0.01) -> np.ndarray:
@@ -324,9 +341,52 @@ def _plan(run: _Run, robot: Robot, task: AssemblyTask, a: PartModel, b: PartMode
         return result
 
 
-def _execute(run: _Run, robot: Robot, plan: Plan) -> list[np.ndarray]:
+def _look_again(run: _Run, robot: Robot, task: AssemblyTask, parts: tuple[PartModel, PartModel],
+                detections: dict[str, Detection], grasps: dict[str, list], table: TablePlane, result: Any,
+                rest: Plan) -> tuple[Any, Plan]:
+    """Detect A again now that it stands at its goal; plan again from there if it is not where it was meant to be.
+
+    Called when A's first detection was ambiguous: a twin pose (same convex
+    hull, e.g. the block turned over with its hole on the far side) explained
+    the view as well. At the goal the camera sees the face that tells the twins
+    apart. If A is there as planned, the rest of the plan goes on; if it is the
+    other twin, the assembly is planned again with A's start where it now is.
+    Returns the result and plan to carry on with.
+    """
+    a, b = parts
+    with run.stage("look_again") as d:
+        detector = run.plugin("detector")
+        _, cloud, viewpoint = _sense(robot)
+        det = detector.detect(cloud, a, table, viewpoint=viewpoint)
+        if not det.found or det.rough is None:
+            raise StageFailed(f"{a.name} not found again at its goal: {det.reason}")
+        T = det.rough
+        if run.cfg.corrector is not None:
+            corrector = run.plugin("corrector")
+            T = corrector.correct(T, a, table, _segment_near(cloud, a, T), viewpoint=viewpoint).T_world_part
+        err = symmetric_pose_error(T, result.T_world_a_goal, (), run.symmetries(a))
+        d["a_vs_goal"] = {k: round(v, 3) for k, v in err.items()}
+        d["still_ambiguous"] = bool(det.details.get("ambiguous"))
+        ex = run.execution
+        if err["position_mm"] <= ex.success_a_goal_mm and err["angle_deg"] <= ex.success_angle_deg:
+            d["replanned"] = False
+            return result, rest
+        d["replanned"] = True
+        planner, motion = run.plugin("assembly_planner"), run.plugin("motion_planner")
+        problem = AssemblyProblem(a, b, task, T, detections[b.name].best, grasps[a.name], grasps[b.name], table)
+        new = planner.plan(problem, robot, motion, progress=run.progress("look_again"))
+        write_model(run.out / "plan_again.json", new.plan)
+        run.artefact("plan_again", run.out / "plan_again.json", "json")
+        d["segments"] = len(new.plan.segments)
+        if not new.success:
+            raise StageFailed(f"{a.name} is not at its goal ({err['position_mm']:.1f} mm / {err['angle_deg']:.1f} deg "
+                              f"off) and planning again failed: {new.reason}", {"failed_at": new.failed_at})
+        return new, new.plan
+
+
+def _execute(run: _Run, robot: Robot, plan: Plan, stage: str = "execute") -> list[np.ndarray]:
     frames: list[np.ndarray] = []
-    with run.stage("execute", total=len(plan.segments)) as d:
+    with run.stage(stage, total=len(plan.segments)) as d:
         record = run.execution.animation and hasattr(robot, "sense_rgb")
         period = 1.0 / run.execution.animation_fps
         if record:

@@ -16,7 +16,15 @@ Pipeline (paper, "Rough detection using point cloud"), all in the world frame
    (coarse on a subsample for ten, fine for the best four), and verify them
    (fitness, inlier RMSE, free-space violations, support on the table); the
    best verified one is the rough pose. When none verifies, the next ten
-   hypotheses get their turn (``max_rounds``).
+   hypotheses get their turn (``max_rounds``);
+4. when no CVFH hypothesis verifies, the part's stable rests on the table at
+   evenly spaced yaws become the hypotheses and go through step 3
+   (:mod:`~asmteach.plugins.detectors.cvfh.resting`; ``details["source"]``
+   says which source the pose came from);
+5. the verified pose is tried again turned by each *hull twin* (a rotation
+   keeping the convex hull, not the part); the pose the observed points
+   favour wins, and twins the view cannot tell apart are listed in
+   ``details["ambiguous"]``.
 
 Nothing verified means ``found: false`` with the reason of the closest miss;
 a wrong pose is never reported as found.
@@ -35,6 +43,7 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Detector, PartModel
 from asmteach.core.models import Detection, StrictModel, TablePlane, Vec3
 from asmteach.plugins.detectors.cvfh.refine import ModelCloud, RefineSettings, Verdict, icp_refine, model_cloud, verify
+from asmteach.plugins.detectors.cvfh.resting import disagreement, hull_twins, resting_hypotheses, stable_rests
 from asmteach.plugins.detectors.cvfh.segment import (
     SegmentSettings,
     check_cloud,
@@ -96,6 +105,16 @@ class CvfhSettings(StrictModel):
     )
     max_rounds: int = Field(3, ge=1, description="rounds of icp_candidates hypotheses tried until one verifies")
     max_clusters: int = Field(3, ge=1, description="largest plausible clusters tried, biggest first")
+    resting_poses: int = Field(
+        8, ge=0, description="most likely stable rests tried when no CVFH hypothesis verifies (0: never)"
+    )
+    resting_yaws: int = Field(24, ge=1, description="yaws per stable rest, evenly spaced")
+    twin_fit: float = Field(0.004, gt=0.0, description="a pose explains a point within this along its ray, metres")
+    twin_off: float = Field(0.010, gt=0.0, description="a pose clearly fails a point beyond this along its ray")
+    twin_min_points: int = Field(10, ge=1, description="points of evidence needed to tell hull twins apart")
+    twin_ratio: float = Field(
+        4.0, ge=1.0, description="the evidence against the loser must exceed that against the winner this many times"
+    )
     size_slack: float = Field(1.25, ge=1.0, description="a cluster wider than this times the part's is skipped")
 
 
@@ -134,6 +153,22 @@ class _Prepared:
     diameter: float
     built_now: bool
     build_ms: float
+    rests: np.ndarray
+    """(k, 4, 4) stable rests on z = 0 (see :func:`stable_rests`)."""
+    twins: list[np.ndarray]
+    """Part-frame rotations keeping the convex hull but not the part (see :func:`hull_twins`)."""
+
+
+@dataclass
+class _Cluster:
+    """One observed cluster and what its hypotheses are checked against (world frame, metres)."""
+
+    cluster: np.ndarray
+    context: np.ndarray
+    icp_in: np.ndarray
+    icp_sub: np.ndarray
+    table: TablePlane
+    eye: np.ndarray
 
 
 @dataclass
@@ -167,7 +202,10 @@ class CvfhIcpDetector(Detector):
         db, built = load_or_build(part.mesh, key, s.views, s.descriptors, s.camera)
         model = model_cloud(part.mesh, s.refine.model_points, seed=self.seed)
         diameter = float(np.linalg.norm(np.ptp(np.asarray(part.mesh.vertices), axis=0)))
-        prep = _Prepared(model, db, diameter, built, 1000.0 * (time.perf_counter() - t0))
+        com = np.asarray(part.center_of_mass, float)
+        rests = stable_rests(part.mesh, com, s.resting_poses) if s.resting_poses else np.zeros((0, 4, 4))
+        twins = hull_twins(part.mesh, com)
+        prep = _Prepared(model, db, diameter, built, 1000.0 * (time.perf_counter() - t0), rests, twins)
         self._prepared[key] = prep
         return prep
 
@@ -290,10 +328,33 @@ class CvfhIcpDetector(Detector):
         clock.lap("matching")
         context = pts[np.linalg.norm(pts - centroid, axis=1) < prep.diameter + 0.02]
         icp_in = _down(cluster, s.descriptors.voxel)
-        icp_sub = icp_in[:: max(1, len(icp_in) // s.coarse_points)]
+        job = _Cluster(cluster, context, icp_in, icp_in[:: max(1, len(icp_in) // s.coarse_points)], table, eye)
+        best, closest, info = self._rounds(scored, job, prep, clock)
+        info["source"] = "cvfh"
+        if best is None and len(prep.rests):
+            rest = [(-1, T, yaw) for T, yaw in resting_hypotheses(
+                cluster, prep.model, prep.rests, table, eye, s.resting_yaws)]
+            scored = sorted(rest, key=lambda h: -prescore(h))
+            clock.lap("matching")
+            best, closest2, info2 = self._rounds(scored, job, prep, clock)
+            if closest2 is not None and (closest is None or closest2.score > closest.score):
+                closest = closest2
+            if best is not None:
+                info = {**info2, "source": "resting", "rounds": info["rounds"] + info2["rounds"]}
+        if best is not None and prep.twins:
+            best, info["twins"], ambiguous = self._twins(best, job, prep, clock)
+            if ambiguous:
+                info["ambiguous"] = ambiguous
+        return _Outcome(best, closest, {**info, "hypotheses": len(hyps), "cluster_points": len(cluster)})
+
+    def _rounds(
+        self, scored: list[tuple[int, np.ndarray, float]], job: _Cluster, prep: _Prepared, clock: StageClock
+    ) -> tuple[Verdict | None, Verdict | None, dict]:
+        """Refine and verify pre-scored hypotheses in rounds until one verifies: ``(best, closest miss, info)``."""
+        s = self.settings
         best: Verdict | None = None
         closest: Verdict | None = None
-        best_info: dict = {}
+        info: dict = {}
         rounds = 0
         # Rounds of icp_candidates hypotheses, best pre-scored first; later rounds only when nothing verified.
         for first in range(0, min(len(scored), s.max_rounds * s.icp_candidates), s.icp_candidates):
@@ -301,9 +362,9 @@ class CvfhIcpDetector(Detector):
             # Coarse ICP on a subsample for every candidate, fine ICP and verification for the best few.
             coarse = []
             for view, T0, roll in scored[first : first + s.icp_candidates]:
-                T = icp_refine(icp_sub, prep.model, T0, s.refine, fine=False)
-                score = _near_share(T, icp_sub, prep.model, s.refine.inlier_distance)
-                if abs(_support_gap(T, prep.model, table)) > 2.0 * s.refine.support_tolerance:
+                T = icp_refine(job.icp_sub, prep.model, T0, s.refine, fine=False)
+                score = _near_share(T, job.icp_sub, prep.model, s.refine.inlier_distance)
+                if abs(_support_gap(T, prep.model, job.table)) > 2.0 * s.refine.support_tolerance:
                     score -= 1.0  # resting inside the table or floating: last in line
                 coarse.append((score, view, T, roll))
             coarse.sort(key=lambda c: -c[0])
@@ -312,20 +373,54 @@ class CvfhIcpDetector(Detector):
             for _, view, T1, roll in coarse[: s.verify_candidates]:
                 if accepted >= 2:
                     break  # two verified poses are enough to pick the better of a near-symmetric pair
-                T = icp_refine(icp_in, prep.model, T1, s.refine, coarse=False)
+                T = icp_refine(job.icp_in, prep.model, T1, s.refine, coarse=False)
                 clock.lap("icp")
-                v = verify(T, cluster, context, eye, prep.model, s.refine, table)
+                v = verify(T, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
                 clock.lap("verify")
                 accepted += v.accepted
                 if v.accepted and (best is None or v.score > best.score):
                     best = v
-                    best_info = {"view": int(view), "roll_deg": round(float(np.degrees(roll)), 2)}
+                    info = {"view": int(view), "roll_deg": round(float(np.degrees(roll)), 2)}
                 if closest is None or v.score > closest.score:
                     closest = v
             if best is not None:
                 break
-        best_info["rounds"] = rounds
-        return _Outcome(best, closest, {**best_info, "hypotheses": len(hyps), "cluster_points": len(cluster)})
+        info["rounds"] = rounds
+        return best, closest, info
+
+    def _twins(
+        self, best: Verdict, job: _Cluster, prep: _Prepared, clock: StageClock
+    ) -> tuple[Verdict, int, list[dict]]:
+        """Try ``best`` turned by each hull twin; keep the pose the disagreement evidence favours.
+
+        Returns the chosen verdict, the number of twins that verified, and the
+        twins the view cannot tell from it (pose, scores, evidence), for the report.
+        """
+        s = self.settings
+        verified, ambiguous = 0, []
+        for S in prep.twins:
+            T = icp_refine(job.icp_in, prep.model, best.T_world_part @ S, s.refine, coarse=False)
+            v = verify(T, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+            clock.lap("verify")
+            if not v.accepted:
+                continue
+            verified += 1
+            ev = disagreement(best.T_world_part, T, job.cluster, job.eye, prep.model, s.twin_fit, s.twin_off)
+            verdict = ev.verdict(s.twin_min_points, s.twin_ratio)
+            if verdict == "b" or (verdict == "ambiguous" and v.score > best.score):
+                best, v = v, best
+                ev = type(ev)(ev.against_b, ev.against_a)
+            if verdict == "ambiguous":
+                ambiguous.append({"T_world_part": v.T_world_part.tolist(), "fitness": round(v.fitness, 4),
+                                  "violation": round(v.violation, 4),
+                                  "points_against": [ev.against_a, ev.against_b]})
+        # alternatives recorded against an earlier best are re-stated against the final one
+        for alt in ambiguous:
+            ev = disagreement(best.T_world_part, np.asarray(alt["T_world_part"]), job.cluster, job.eye,
+                              prep.model, s.twin_fit, s.twin_off)
+            alt["points_against"] = [ev.against_a, ev.against_b]
+        clock.lap("verify")
+        return best, verified, ambiguous
 
     def _hypotheses(
         self, desc: CloudDescription, db: ViewDatabase, T_world_vcam: np.ndarray

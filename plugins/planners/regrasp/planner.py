@@ -102,20 +102,24 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         )
         details["b"] = res_b
         if not res_b.success:
-            result.plan = self._timed(robot, res_a, None, t0)
+            result.plan = self._timed(robot, res_a, None, t0, (a.name, b.name))
             return self._fail(result, res_b, f"part B ({b.name})", t0, robot, keep_plan=True)
-        result.plan = self._timed(robot, res_a, res_b, t0)
+        result.plan = self._timed(robot, res_a, res_b, t0, (a.name, b.name))
         result.success = True
         return result
 
-    def _timed(self, robot: Robot, res_a: TransferResult, res_b: TransferResult | None, t0: float) -> Plan:
+    def _timed(self, robot: Robot, res_a: TransferResult, res_b: TransferResult | None, t0: float,
+               names: tuple[str, str]) -> Plan:
         steps = list(res_a.steps) + (list(res_b.steps) if res_b is not None else [])
         keyframes = [dict(k, part="A") for k in res_a.keyframes]
         if res_b is not None:
             keyframes += [dict(k, part="B") for k in res_b.keyframes]
         stats = {"A": res_a.stats, "B": res_b.stats if res_b is not None else None,
                  "planning_seconds": round(time.perf_counter() - t0, 3)}
-        return to_plan(steps, robot, self.settings.acceleration, keyframes=keyframes, stats=stats)
+        plan = to_plan(steps, robot, self.settings.acceleration, keyframes=keyframes, stats=stats)
+        for k, seg in enumerate(plan.segments):  # one segment per step: A's steps first, then B's
+            seg.part = names[0] if k < len(res_a.steps) else names[1]
+        return plan
 
     def _fail(self, result: AssemblyResult, res: TransferResult, who: str, t0: float, robot: Robot,
               keep_plan: bool = False) -> AssemblyResult:

@@ -1,0 +1,172 @@
+"""Pose hypotheses from what the table tells: resting poses, and twins of the convex hull.
+
+Two sources of hypotheses besides CVFH view matching, both built on the
+paper's premise that a part lies at rest on the table:
+
+* **Resting hypotheses.** A part at rest on the table takes one of its
+  stable poses (trimesh's ``compute_stable_poses``), turned about the table
+  normal and moved on the table: three unknowns instead of six. Each stable
+  pose is tried at evenly spaced yaws, placed so the centroid of the model
+  surface the camera would see falls on the observed cluster's centroid (in
+  the table plane). The detector uses them when no CVFH hypothesis verifies,
+  e.g. a peg lying with its head towards the camera, which shows a cube and
+  hides its shank: the nearest rendered views all show the shank and none of
+  their hypotheses comes within 50 deg.
+* **Hull twins.** A rotation that maps the part's convex hull onto itself but
+  not the part (a block with a blind hole turned over: same outside, hole on
+  the other side) gives a second pose that explains every observed point on
+  the outside equally well. A verified pose is tried again at each twin, and
+  the twins are told apart only by the *disagreement evidence*: observed
+  points that one pose explains (along the camera ray, the model surface is
+  within ``fit`` of the point) and the other clearly does not (more than
+  ``off`` away, e.g. the camera saw a plain face where the other pose has the
+  hole). When neither pose has enough evidence against it, the view cannot
+  tell them apart and the detection says so (``details["ambiguous"]``).
+
+Frames: ``T_world_part`` 4x4, metres; the table frame has z along the
+table normal, at the table height.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+import asmteach.core  # noqa: F401  (loads libusb before open3d)
+from asmteach.core import geometry
+from asmteach.core.models import TablePlane
+from asmteach.core.symmetry import part_symmetries
+from asmteach.plugins.detectors.cvfh.refine import ModelCloud
+
+import open3d as o3d  # isort: skip
+
+__all__ = ["Disagreement", "disagreement", "hull_twins", "resting_hypotheses", "stable_rests", "table_frame"]
+
+
+def stable_rests(mesh: trimesh.Trimesh, com: np.ndarray, max_poses: int) -> np.ndarray:
+    """``(k, 4, 4)`` part poses resting on the plane z = 0, most likely first, footprint centred on x = y = 0."""
+    T, p = trimesh.poses.compute_stable_poses(mesh, center_mass=np.asarray(com, float))
+    T = np.asarray(T, float)[np.argsort(-np.asarray(p, float))][:max_poses]
+    out = []
+    for Ti in T:
+        v = geometry.transform_points(Ti, np.asarray(mesh.vertices))
+        c = 0.5 * (v.min(axis=0) + v.max(axis=0))
+        out.append(geometry.compose(geometry.from_rotation(np.eye(3), [-c[0], -c[1], -v[:, 2].min()]), Ti))
+    return np.asarray(out).reshape(-1, 4, 4)
+
+
+def hull_twins(mesh: trimesh.Trimesh, com: np.ndarray) -> list[np.ndarray]:
+    """Rotations (``(4, 4)``, part frame) mapping the convex hull onto itself but not the part.
+
+    One per class: two twins that differ by a symmetry of the part itself give
+    the same pose and only the first is kept.
+    """
+    hull = mesh.convex_hull
+    own = [S[:3, :3] for S in part_symmetries(mesh, np.asarray(com, float))]
+    out: list[np.ndarray] = []
+    for S in part_symmetries(hull, np.asarray(hull.center_mass, float)):
+        R = S[:3, :3]
+        # R and R' give the same pose when R' = R P for a symmetry P of the part.
+        if any(np.allclose(R @ P, np.eye(3), atol=1e-6) for P in own):
+            continue
+        if any(np.allclose(Q[:3, :3] @ P, R, atol=1e-6) for Q in out for P in own):
+            continue
+        out.append(S)
+    return out
+
+
+def table_frame(table: TablePlane) -> np.ndarray:
+    """``T_world_table``: z along the table normal, origin on the table below the world origin."""
+    n = np.asarray(table.normal, float)
+    n = n / np.linalg.norm(n)
+    x = np.cross([0.0, 1.0, 0.0], n)
+    if np.linalg.norm(x) < 1e-6:
+        x = np.array([1.0, 0.0, 0.0])
+    x /= np.linalg.norm(x)
+    return geometry.from_rotation(np.column_stack([x, np.cross(n, x), n]), n * table.height)
+
+
+def resting_hypotheses(
+    cluster: np.ndarray,
+    model: ModelCloud,
+    rests: np.ndarray,
+    table: TablePlane,
+    eye: np.ndarray,
+    yaws: int,
+    samples: int = 400,
+) -> list[tuple[np.ndarray, float]]:
+    """``(T_world_part, yaw)`` for every stable rest at ``yaws`` yaws, placed under the observed ``cluster``.
+
+    ``cluster`` (n, 3) and ``eye`` (camera centre) are in the world frame. The
+    model's camera-facing, unoccluded surface samples are moved onto the
+    cluster's centroid in the table plane.
+    """
+    T_wt = table_frame(table)
+    T_tw = geometry.invert(T_wt)
+    c_t = geometry.transform_points(T_tw, cluster).mean(axis=0)
+    step = max(1, len(model.points) // samples)
+    pts, nrm = model.points[::step], model.normals[::step]
+    poses = []
+    for yaw in np.linspace(-np.pi, np.pi, yaws, endpoint=False):
+        for R in rests:
+            T = geometry.compose(T_wt, geometry.from_rotation(np.eye(3), [c_t[0], c_t[1], 0.0]), geometry.rot_z(yaw), R)
+            poses.append((T, float(yaw)))
+    Ts = np.asarray([T for T, _ in poses])
+    # eye in each hypothesis' part frame; rays to every sample, one batched cast
+    eyes = np.einsum("hij,j->hi", np.linalg.inv(Ts), np.append(eye, 1.0))[:, :3]
+    d = pts[None] - eyes[:, None]
+    dist = np.linalg.norm(d, axis=2)
+    rays = np.concatenate([np.broadcast_to(eyes[:, None], d.shape), d / dist[..., None]], axis=2)
+    hit = model.scene.cast_rays(o3d.core.Tensor(rays.reshape(-1, 6).astype(np.float32)))["t_hit"].numpy()
+    seen = (hit.reshape(dist.shape) > dist - 1e-3) & (np.einsum("hnk,nk->hn", -d, nrm) > 0.0)
+    out = []
+    for (T, yaw), mask in zip(poses, seen, strict=True):
+        if not mask.any():
+            continue
+        vis_t = geometry.transform_points(T_tw @ T, pts[mask]).mean(axis=0)
+        shift = np.array([c_t[0] - vis_t[0], c_t[1] - vis_t[1], 0.0])
+        out.append((T_wt @ geometry.from_rotation(np.eye(3), shift) @ T_tw @ T, yaw))
+    return out
+
+
+@dataclass(frozen=True)
+class Disagreement:
+    """Observed points each of two poses clearly fails to explain where the other explains them."""
+
+    against_a: int
+    against_b: int
+
+    def verdict(self, min_points: int, ratio: float) -> str:
+        """``"a"`` or ``"b"`` (the pose the evidence favours) or ``"ambiguous"``."""
+        if self.against_b >= min_points and self.against_a * ratio <= self.against_b:
+            return "a"
+        if self.against_a >= min_points and self.against_b * ratio <= self.against_a:
+            return "b"
+        return "ambiguous"
+
+
+def disagreement(
+    T_a: np.ndarray, T_b: np.ndarray, cluster: np.ndarray, eye: np.ndarray, model: ModelCloud, fit: float, off: float
+) -> Disagreement:
+    """Count, for two poses, the cluster points each one is ``off`` (metres) from along the camera ray
+    while the other is within ``fit``.
+
+    The residual is measured along the ray from ``eye`` through the point (the
+    depth the model predicts against the depth seen), not to the nearest
+    surface: a plain face seen where a pose has a hole is 1-2 mm from the
+    hole's rim but centimetres from the bottom the camera would see.
+    """
+
+    def residual(T: np.ndarray) -> np.ndarray:
+        T_pw = geometry.invert(T)
+        local = geometry.transform_points(T_pw, cluster)
+        e = geometry.transform_points(T_pw, np.asarray(eye, float)[None])[0]
+        d = local - e
+        dist = np.linalg.norm(d, axis=1)
+        rays = np.hstack([np.broadcast_to(e, d.shape), d / dist[:, None]]).astype(np.float32)
+        return model.scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy() - dist  # inf where it misses
+
+    ra, rb = np.abs(residual(T_a)), np.abs(residual(T_b))
+    return Disagreement(int(np.sum((ra > off) & (rb < fit))), int(np.sum((rb > off) & (ra < fit))))
