@@ -74,3 +74,25 @@ def test_whole_run_goes_through_every_stage_and_writes_its_report(tmp_path: Path
     assert "data:image/png;base64" in html and "http://" not in html and "https://" not in html
     for name in ("task.json", "plan.json", "detection.png", "execution.gif", "regrasp_graph_A.png"):
         assert (out / name).is_file(), name
+
+
+@pytest.mark.slow
+def test_an_ambiguous_block_is_looked_at_again_once_placed_and_the_assembly_planned_again(tmp_path: Path) -> None:
+    """The demo's seed 12 lays the holed block on its side with the hole away from the camera.
+
+    The detector reports the turned-over twin as ambiguous and happens to pick
+    it; once A stands at its goal the camera sees its top, finds it upside down
+    (40 mm / 180 deg from the goal), and the assembly is planned again from there.
+    """
+    out = tmp_path / "out"
+    main(["run", str(ROOT / "configs/demo.yaml"), "--out", str(out), "--set", "seed=12",
+          "--set", "execution.animation=false"])
+    report = json.loads((out / "report.json").read_text())
+    block = next(d for d in report["detections"] if d["part"] == "holed_block")
+    assert block["details"]["ambiguous"]
+    stages = {s["stage"]: s for s in report["stages"]}
+    assert stages["execute_a"]["ok"] and stages["look_again"]["ok"], report["reason"]
+    look = stages["look_again"]["details"]
+    assert look["replanned"] and look["a_vs_goal"]["angle_deg"] > 170.0
+    assert (out / "plan_again.json").is_file()
+    assert report["success"], report["reason"]
