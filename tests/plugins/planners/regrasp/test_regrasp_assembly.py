@@ -3,10 +3,7 @@
 import numpy as np
 import pytest
 
-from asmteach.core import geometry, registry
-from asmteach.core.geometry import compose, from_rpy, rot_z
-from asmteach.core.interfaces import AssemblyProblem
-from asmteach.core.models import TablePlane
+from asmteach.core import geometry
 from asmteach.core.parts import build_part, load_structure
 from asmteach.plugins.planners.motion.interpolate import densify
 from asmteach.plugins.planners.placements.planner import compute_placements
@@ -47,20 +44,9 @@ def test_placement_slots_skip_placements_equal_under_the_parts_symmetry(peg) -> 
 
 
 @pytest.mark.slow
-def test_peg_in_hole_plan_is_collision_free_and_ends_assembled(peg) -> None:
-    task, a, b = peg
-    robot = registry.create("robots", "nextage_pybullet", {"ik": {"max_starts": 4}}, seed=0)
-    grasp_planner = registry.create("grasp_planners", "antipodal", {}, seed=0)
-    motion = registry.create("motion_planners", "rrtconnect", {}, seed=0)
-    planner = registry.create("assembly_planners", "regrasp", {}, seed=0)
-    pa, pb = compute_placements(a), compute_placements(b)
-    T_a = compose(from_rpy(0, 0, 0, t=[0.33, 0.22, 0.0]), rot_z(0.5), pa[0].T_table_part)
-    # B standing on its shank: a grasp of the head serves both the pick and the insertion
-    upright = next(p for p in pb if p.T_table_part[2, 2] > 0.99)
-    T_b = compose(from_rpy(0, 0, 0, t=[0.36, -0.22, 0.0]), rot_z(-0.3), upright.T_table_part)
-    problem = AssemblyProblem(a, b, task, T_a, T_b, grasp_planner.plan(a, robot.hand),
-                              grasp_planner.plan(b, robot.hand), TablePlane(height=0.0))
-    res = planner.plan(problem, robot, motion)
+def test_peg_in_hole_plan_is_collision_free_and_ends_assembled(peg_in_hole_plan) -> None:
+    task, a, b = peg_in_hole_plan.task, peg_in_hole_plan.a, peg_in_hole_plan.b
+    robot, res = peg_in_hole_plan.robot, peg_in_hole_plan.result
     assert res.success, res.reason
     plan = res.plan
     closes = [s.gripper for s in plan.segments if s.gripper is not None and s.gripper.action == "close"]
@@ -91,4 +77,3 @@ def test_peg_in_hole_plan_is_collision_free_and_ends_assembled(peg) -> None:
     for seg in home_moves:
         dense = densify(np.asarray(seg.trajectory.positions), 0.01)
         assert not robot.in_collision(seg.trajectory.arm, dense).any()
-    robot.close()

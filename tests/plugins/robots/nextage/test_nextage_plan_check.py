@@ -266,30 +266,12 @@ def test_bad_input_says_what_to_fix(robot) -> None:
 
 
 @pytest.mark.slow
-def test_a_real_peg_in_hole_plan_is_collision_free_when_rechecked() -> None:
-    """The recipe of tests/plugins/planners/regrasp/test_regrasp_assembly.py, re-checked at 5 mm."""
-    from asmteach.core import registry
-    from asmteach.core.geometry import compose, from_rpy, rot_z
-    from asmteach.core.interfaces import AssemblyProblem
-    from asmteach.core.parts import load_structure
-    from asmteach.plugins.planners.placements.planner import compute_placements
-
-    task = load_structure("configs/parts/set1/peg_in_hole.yaml")
-    a, b = build_part(task.part_a), build_part(task.part_b)
-    robot = registry.create("robots", "nextage_pybullet", {"ik": {"max_starts": 4}}, seed=0)
-    grasp_planner = registry.create("grasp_planners", "antipodal", {}, seed=0)
-    motion = registry.create("motion_planners", "rrtconnect", {}, seed=0)
-    planner = registry.create("assembly_planners", "regrasp", {}, seed=0)
-    pa, pb = compute_placements(a), compute_placements(b)
-    T_a = compose(from_rpy(0, 0, 0, t=[0.33, 0.22, 0.0]), rot_z(0.5), pa[0].T_table_part)
-    upright = next(p for p in pb if p.T_table_part[2, 2] > 0.99)
-    T_b = compose(from_rpy(0, 0, 0, t=[0.36, -0.22, 0.0]), rot_z(-0.3), upright.T_table_part)
-    problem = AssemblyProblem(a, b, task, T_a, T_b, grasp_planner.plan(a, robot.hand),
-                              grasp_planner.plan(b, robot.hand), TABLE)
-    res = planner.plan(problem, robot, motion)
+def test_a_real_peg_in_hole_plan_is_collision_free_when_rechecked(peg_in_hole_plan) -> None:
+    """The plan of tests/plugins/planners/regrasp/test_regrasp_assembly.py, re-checked at 5 mm."""
+    p = peg_in_hole_plan
+    a, b, T_a, T_b, robot, res = p.a, p.b, p.T_a, p.T_b, p.robot, p.result
     assert res.success, res.reason
     check = robot.verify_plan(res.plan, {a.name: (a, T_a), b.name: (b, T_b)}, TABLE)
-    robot.close()
     assert check.ok, check.summary()
     assert check.warnings == []
     n_traj = sum(s.trajectory is not None for s in res.plan.segments)
