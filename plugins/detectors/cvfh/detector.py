@@ -397,7 +397,7 @@ class CvfhIcpDetector(Detector):
         twins the view cannot tell from it (pose, scores, evidence), for the report.
         """
         s = self.settings
-        verified, ambiguous = 0, []
+        verified, undecided = 0, []
         for S in prep.twins:
             T = icp_refine(job.icp_in, prep.model, best.T_world_part @ S, s.refine, coarse=False)
             v = verify(T, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
@@ -409,16 +409,15 @@ class CvfhIcpDetector(Detector):
             verdict = ev.verdict(s.twin_min_points, s.twin_ratio)
             if verdict == "b" or (verdict == "ambiguous" and v.score > best.score):
                 best, v = v, best
-                ev = type(ev)(ev.against_b, ev.against_a)
             if verdict == "ambiguous":
-                ambiguous.append({"T_world_part": v.T_world_part.tolist(), "fitness": round(v.fitness, 4),
-                                  "violation": round(v.violation, 4),
-                                  "points_against": [ev.against_a, ev.against_b]})
-        # alternatives recorded against an earlier best are re-stated against the final one
-        for alt in ambiguous:
-            ev = disagreement(best.T_world_part, np.asarray(alt["T_world_part"]), job.cluster, job.eye,
-                              prep.model, s.twin_fit, s.twin_off)
-            alt["points_against"] = [ev.against_a, ev.against_b]
+                undecided.append(v)
+        # the evidence is stated against the final choice
+        ambiguous = []
+        for v in undecided:
+            ev = disagreement(best.T_world_part, v.T_world_part, job.cluster, job.eye, prep.model, s.twin_fit,
+                              s.twin_off)
+            ambiguous.append({"T_world_part": v.T_world_part.tolist(), "fitness": round(v.fitness, 4),
+                              "violation": round(v.violation, 4), "points_against": [ev.against_a, ev.against_b]})
         clock.lap("verify")
         return best, verified, ambiguous
 

@@ -33,7 +33,7 @@ from asmteach.plugins.detectors.cvfh.segment import to_o3d
 
 import open3d as o3d  # isort: skip
 
-__all__ = ["ModelCloud", "RefineSettings", "Verdict", "icp_refine", "model_cloud", "verify"]
+__all__ = ["ModelCloud", "RefineSettings", "Verdict", "icp_refine", "model_cloud", "ray_depths", "verify"]
 
 reg = o3d.pipelines.registration
 
@@ -197,10 +197,19 @@ def _free_space_violation(
     near = np.linalg.norm(local - model.center, axis=1) < 1.5 * model.radius + 0.01
     if not near.any():
         return 0.0
-    pts = local[near]
     eye = geometry.transform_points(T_part_world, viewpoint[None])[0]
-    dirs = pts - eye
-    dist = np.linalg.norm(dirs, axis=1)
-    rays = np.hstack([np.repeat(eye[None], len(pts), axis=0), dirs / dist[:, None]]).astype(np.float32)
-    hit = model.scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+    hit, dist = ray_depths(model, eye, local[near])
     return float(np.mean(hit < dist - margin))
+
+
+def ray_depths(model: ModelCloud, eye: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(t_hit, dist)`` along the rays from ``eye`` through ``points`` (both part frame, metres).
+
+    ``t_hit`` is where each ray first meets the model (``inf`` where it misses),
+    ``dist`` how far the point is from the eye: the depth the model predicts
+    against the depth seen.
+    """
+    d = np.asarray(points, float) - eye
+    dist = np.linalg.norm(d, axis=1)
+    rays = np.hstack([np.broadcast_to(eye, d.shape), d / dist[:, None]]).astype(np.float32)
+    return model.scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy(), dist

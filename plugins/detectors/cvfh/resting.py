@@ -38,7 +38,7 @@ import asmteach.core  # noqa: F401  (loads libusb before open3d)
 from asmteach.core import geometry
 from asmteach.core.models import TablePlane
 from asmteach.core.symmetry import part_symmetries
-from asmteach.plugins.detectors.cvfh.refine import ModelCloud
+from asmteach.plugins.detectors.cvfh.refine import ModelCloud, ray_depths
 
 import open3d as o3d  # isort: skip
 
@@ -161,12 +161,9 @@ def disagreement(
 
     def residual(T: np.ndarray) -> np.ndarray:
         T_pw = geometry.invert(T)
-        local = geometry.transform_points(T_pw, cluster)
-        e = geometry.transform_points(T_pw, np.asarray(eye, float)[None])[0]
-        d = local - e
-        dist = np.linalg.norm(d, axis=1)
-        rays = np.hstack([np.broadcast_to(e, d.shape), d / dist[:, None]]).astype(np.float32)
-        return model.scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy() - dist  # inf where it misses
+        eye_local = geometry.transform_points(T_pw, np.asarray(eye, float)[None])[0]
+        hit, dist = ray_depths(model, eye_local, geometry.transform_points(T_pw, cluster))
+        return hit - dist  # inf where the ray misses the model
 
     ra, rb = np.abs(residual(T_a)), np.abs(residual(T_b))
     return Disagreement(int(np.sum((ra > off) & (rb < fit))), int(np.sum((rb > off) & (ra < fit))))
