@@ -67,6 +67,9 @@ class AssemblySettings(StrictModel):
     """How keyframes and motions are chosen. Distances in metres, angles in radians, times in seconds."""
 
     retract: float = Field(0.05, gt=0.0, le=0.5, description="pre-assembly retraction of B along -v_a")
+    vertical_snap_deg: float = Field(
+        2.0, ge=0.0, le=10.0,
+        description="a taught v_a this close to straight down at A's goal is made straight down, degrees (0: off)")
     goal_xy: tuple[float, float] = Field((0.40, 0.0), description="where A is assembled on the table (world x, y)")
     goal_yaw: float = Field(0.0, description="yaw of A's goal placement about the table normal")
     placement_yaws: int = Field(4, ge=1, le=24, description="evenly sampled yaws per stable placement")

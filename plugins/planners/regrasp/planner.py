@@ -68,7 +68,8 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         t0 = time.perf_counter()
         a, b, h = problem.part_a, problem.part_b, problem.table.height
         goal = choose_assembly_goal(
-            a, b, problem.task, compute_placements(a), xy=s.goal_xy, yaw=s.goal_yaw, table_height=h, retract=s.retract
+            a, b, problem.task, compute_placements(a), xy=s.goal_xy, yaw=s.goal_yaw, table_height=h, retract=s.retract,
+            vertical_snap=float(np.radians(s.vertical_snap_deg)),
         )
         table = table_obstacle(robot, h)
         q_home = {arm: robot.home(arm) for arm in robot.arms}

@@ -26,7 +26,7 @@ from asmteach.plugins.robots.nextage.batch_ik import ik_many
 from asmteach.plugins.robots.nextage.collision import CollisionChecker
 from asmteach.plugins.robots.nextage.kinematics import IKSettings, Kinematics
 from asmteach.plugins.robots.nextage.plan_check import CheckedArm, PlanCheck, recheck_plan
-from asmteach.plugins.robots.nextage.sim import GripperJoints, PyBulletWorld
+from asmteach.plugins.robots.nextage.sim import POSITION_GAIN, GripperJoints, PyBulletWorld
 
 __all__ = ["ArmRobot", "ArmRobotSettings", "CameraMount"]
 
@@ -51,6 +51,9 @@ class ArmRobotSettings(StrictModel):
     start_tolerance: float = Field(0.02, gt=0.0, description="radians between the current q and a trajectory's start")
     grip_force: float = Field(40.0, gt=0.0, description="finger force, newtons")
     time_step: float = Field(1.0 / 240.0, gt=0.0, le=0.01, description="physics step, seconds")
+    position_gain: float = Field(
+        POSITION_GAIN, gt=0.0, le=1.0,
+        description="positionGain of the simulated joint servos; PyBullet's default 0.1 leaves ~1 mrad steady error")
     camera: CameraMount = Field(default_factory=CameraMount)
 
 
@@ -191,7 +194,7 @@ class ArmRobot(Robot):
         """The PyBullet world (started on first use)."""
         if self._sim is None:
             self._sim = PyBulletWorld(self.urdf, self.T_world_base, gui=self.settings.gui,
-                                      time_step=self.settings.time_step)
+                                      time_step=self.settings.time_step, position_gain=self.settings.position_gain)
             for a, s in self._arms.items():
                 self._sim.set_joints(s.joints, self.kin.get_arm(a))
                 self._sim.set_joints(s.gripper.finger_joints, s.gripper.open_values)

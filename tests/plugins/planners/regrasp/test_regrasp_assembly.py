@@ -31,6 +31,26 @@ def test_goal_makes_the_insertion_vertical_and_keeps_b_above_the_table(peg) -> N
     assert low_a == pytest.approx(0.1, abs=1e-9)
 
 
+@pytest.mark.parametrize(("tilt_deg", "snapped"), [(0.9, True), (5.0, False)])
+def test_a_taught_insertion_a_degree_off_vertical_goes_straight_down(peg, tilt_deg: float, snapped: bool) -> None:
+    """Teaching noise of ~1 deg in v_a would start B 0.8 mm off the hole's axis 50 mm above it (0.4 mm
+    where it enters a 25 mm deep hole with 0.5 mm clearance); a clearly slanted v_a is kept."""
+    task, a, b = peg
+    t = np.radians(tilt_deg)
+    tilted = task.model_copy(update={"v_a": np.array([np.sin(t), 0.0, -np.cos(t)])})
+    goal = choose_assembly_goal(a, b, tilted, compute_placements(a), xy=(0.4, 0.0), yaw=0.3, table_height=0.1,
+                                retract=0.05)
+    np.testing.assert_allclose(goal.T_world_b, goal.T_world_a @ task.T_A_B, atol=1e-12)
+    np.testing.assert_allclose(goal.T_world_b_pre[:3, 3] - goal.T_world_b[:3, 3], -0.05 * goal.v_world, atol=1e-12)
+    if snapped:
+        np.testing.assert_array_equal(goal.v_world, [0.0, 0.0, -1.0])
+    else:
+        assert np.degrees(np.arccos(-goal.v_world[2])) == pytest.approx(tilt_deg, abs=1e-6)
+    off = choose_assembly_goal(a, b, tilted, compute_placements(a), xy=(0.4, 0.0), yaw=0.3, table_height=0.1,
+                               retract=0.05, vertical_snap=0.0)
+    assert np.degrees(np.arccos(-off.v_world[2])) == pytest.approx(tilt_deg, abs=1e-6)
+
+
 def test_placement_slots_skip_placements_equal_under_the_parts_symmetry(peg) -> None:
     _, _, b = peg
     placements = compute_placements(b)  # square head: four lying placements are one
