@@ -6,17 +6,43 @@ Pipeline (part frame, metres, radians):
 2. the opposite contact by ray casting through the part along ``-normal``;
 3. jaw opening within the stroke (with approach clearance) and the antipodal
    friction-cone test (``mu``, default 0.3: a 16.7 deg cone);
-4. palm orientations sampled about the grasp axis;
+4. palm orientations about the grasp axis: ``orientations`` evenly spaced,
+   plus, per stable resting pose of the part (the placements the regrasp
+   planner uses), the one approaching most steeply from above in that pose;
 5. pads on the surface: a grid of pad points is ray-cast onto the part along
    the jaw axis; a point is *supported* when the surface lies within
    ``pad_tolerance`` of the pad plane. No point may meet material in front of
    the plane (a protrusion), and at least ``pad_min_support`` of each pad must
    be supported; the rest may overhang an edge or a hole (1.0: pads fully on
    the surface);
-6. quality score from the grasp axis' distance to the centre of mass, the
+6. set-backs: besides the pads centred on the contacts, every orientation is
+   also offered with the TCP moved back along its approach axis (-z) as far
+   as both pads stay supported, at most half a pad length (so the sampled
+   contacts stay under the pads). Such a *shallow* grasp holds the part near
+   the fingertip end of the pads, and the fingertips reach that much less past
+   the contacts: a side grasp from above with centred pads puts the fingertips
+   (half a pad length past the TCP) into the table whenever the contacts are
+   lower than that, which is most side faces of a part lying on the table;
+7. quality score from the grasp axis' distance to the centre of mass, the
    normals' alignment with the axis and the pads' contact area;
-7. in score order: near-duplicates dropped, then hand (palm, fingers and
-   their approach sweep) against part collision with python-fcl.
+8. selection, round robin over buckets, one kept grasp per bucket and round
+   until ``max_grasps`` are kept: near-duplicates dropped, then hand (palm,
+   fingers and their approach sweep, the hand fully open on its way in as the
+   robot opens it) against part collision with python-fcl.
+   A shallow candidate whose approach is within 60 deg of straight down in
+   some resting pose belongs to the pose where it is steepest, and these
+   buckets are taken by the hand's clearance above the table in that pose
+   (highest first, in 2 mm steps), then by score; every other candidate
+   belongs to the nearest of ``approach_bins`` approach directions (centred
+   and shallow apart), best score first. One grasp set serves every pose of
+   the part, and each pose can only use the grasps that approach from above
+   it; the best scores overall would fill the set with a dozen contact pairs
+   near the centre of mass, in all their orientations.
+
+A shallow grasp's ``p0``, ``p1`` are the pad centres on the two contact planes
+(the TCP is their midpoint, as :class:`~asmteach.core.models.Grasp` has it);
+they may lie past the part's edge by up to half a pad length, and the sampled
+contacts lie under the pads.
 
 Results are cached on disk per part mesh hash, centre of mass, settings, hand
 and seed (``~/.cache/asmteach/grasps`` or ``$ASMTEACH_CACHE_DIR``).
@@ -29,8 +55,10 @@ import json
 import logging
 import os
 import time
+from collections import deque
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import Field, ValidationError
@@ -44,14 +72,23 @@ from asmteach.plugins.planners.grasps.antipodal import antipodal_angles, frictio
 from asmteach.plugins.planners.grasps.checks import check_graspable_width, check_mesh, check_wall_thickness
 from asmteach.plugins.planners.grasps.hand_geometry import MeshCollider, hand_boxes, pad_grid
 from asmteach.plugins.planners.grasps.sampling import ContactPairs, Raycaster, find_opposite_contacts, sample_surface
+from asmteach.plugins.planners.placements.planner import compute_placements
 
-__all__ = ["AntipodalGraspPlanner", "AntipodalSettings", "default_cache_dir"]
+__all__ = ["AntipodalGraspPlanner", "AntipodalSettings", "default_cache_dir", "resting_directions",
+           "sphere_directions", "table_gaps"]
 
 log = logging.getLogger(__name__)
 
-CACHE_VERSION = 1
+CACHE_VERSION = 3
 # Fingers checked this far off the contact planes when closed (metres), so touching is not colliding.
 _CONTACT_GAP = 2e-4
+# Shallow grasps set back less than this (metres) are the centred grasp again, for every purpose.
+_MIN_SET_BACK = 1e-3
+# Shallow grasps are ranked by the hand's clearance above the table in steps of this (metres): finer
+# differences are within the approach clearance (2 mm a side) and not worth a worse score.
+_GAP_STEP = 0.002
+# Approaches steeper than this (cosine to a resting pose's downward direction) are offered per resting pose.
+_MIN_STEEPNESS = 0.5
 
 
 class ScoreWeights(StrictModel):
@@ -71,6 +108,10 @@ class AntipodalSettings(StrictModel):
     orientations: int = Field(24, ge=1, le=360, description="palm orientations sampled about each grasp axis")
     clearance: float = Field(0.002, ge=0.0, description="free space per side between fingers and part on approach")
     approach_sweep: float = Field(0.03, ge=0.0, description="hand boxes extended backward by this approach path")
+    approach_opening: Literal["full", "pre-shaped"] = Field(
+        "full",
+        description="the hand on its approach: fully open (the Nextage plugin opens the gripper completely before "
+        "every approach, in execution and in the plan re-check) or pre-shaped to the width plus clearance a side")
     pad_grid: tuple[int, int] = Field((4, 5), description="pad sample points along the pad's x and z")
     pad_tolerance: float = Field(0.001, gt=0.0, description="surface within this distance of the pad plane")
     pad_inset: float = Field(0.0005, ge=0.0, description="pad samples kept this far inside the pad edge")
@@ -80,7 +121,17 @@ class AntipodalSettings(StrictModel):
     min_thickness: float = Field(0.002, gt=0.0, description="walls thinner than this mark a thin shell")
     dedup_distance: float = Field(0.005, ge=0.0, description="TCPs closer than this ...")
     dedup_angle_deg: float = Field(15.0, ge=0.0, le=180.0, description="... and rotations closer than this are one")
-    max_grasps: int = Field(300, ge=1, description="keep at most this many (best first)")
+    max_grasps: int = Field(
+        600, ge=1,
+        description="keep at most this many; each resting pose of the part can use only those approaching from "
+        "above it, about a quarter")
+    depth_levels: int = Field(
+        6, ge=1, le=32,
+        description="TCP set-backs tried along -z, evenly from 0 to half the pad length minus pad_inset; 1: pads "
+        "always centred on the contacts")
+    depth_refine: int = Field(3, ge=0, le=10, description="bisection steps refining the shallowest supported set-back")
+    approach_bins: int = Field(
+        32, ge=1, le=1000, description="approach directions (part frame) the kept grasps are spread over")
     weights: ScoreWeights = Field(default_factory=ScoreWeights)
     cache: bool = Field(True, description="read and write the on-disk cache")
     cache_dir: str | None = Field(None, description="cache folder; default $ASMTEACH_CACHE_DIR or ~/.cache/asmteach")
@@ -188,11 +239,12 @@ class AntipodalGraspPlanner(GraspPlanner):
                 f"{np.degrees(cone):.1f} deg for mu={s.mu}); the opposite faces are not parallel enough"
             )
 
-        R, pair_idx = self._orientations(pairs, mesh.extents)
-        support = self._pad_support(rc, hand, pairs, R, pair_idx)
-        ok_pad = support >= s.pad_min_support - 1e-9
-        R, pair_idx, support = R[ok_pad], pair_idx[ok_pad], support[ok_pad]
+        down = resting_directions(part)
+        R, pair_idx = self._orientations(pairs, mesh.extents, down)
+        cand = self._set_backs(rc, hand, pairs, R, pair_idx)
+        R, pair_idx, support = cand.R, cand.pair_idx, cand.support
         stats["pads_supported"] = len(pair_idx)
+        stats["shallow"] = int(np.count_nonzero(cand.shallow))
         if len(pair_idx) == 0:
             raise UserError(
                 f"part {part.name!r}: no grasp has {s.pad_min_support:.0%} of both "
@@ -200,7 +252,7 @@ class AntipodalGraspPlanner(GraspPlanner):
                 "(faces too small or curved for the pads)"
             )
         score = self._score(part, pairs, angles, pair_idx, support, cone, mesh.extents)
-        grasps, n_dup, n_col = self._select(part, hand, pairs, R, pair_idx, score)
+        grasps, n_dup, n_col = self._select(part, hand, pairs, cand, score, down)
         stats.update(duplicates=n_dup, colliding=n_col, kept=len(grasps))
         if not grasps:
             raise UserError(
@@ -209,8 +261,17 @@ class AntipodalGraspPlanner(GraspPlanner):
             )
         return grasps, stats
 
-    def _orientations(self, pairs: ContactPairs, extents: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """TCP rotations ``(m, 3, 3)`` (columns x, y, z) about each grasp axis, and their pair index."""
+    def _orientations(
+        self, pairs: ContactPairs, extents: np.ndarray, down: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """TCP rotations ``(m, 3, 3)`` (columns x, y, z) about each grasp axis, and their pair index.
+
+        ``orientations`` evenly spaced ones per pair, then, per pair and resting
+        direction ``down`` (``(u, 3)``, part frame, into the table), the one
+        approaching most steeply from above with the part resting that way: ``z``
+        is the resting direction projected onto the plane normal to the grasp
+        axis (kept when that leaves at least ``_MIN_STEEPNESS`` of it).
+        """
         n, k = len(pairs), self.settings.orientations
         y = (pairs.p1 - pairs.p0) / pairs.width[:, None]
         # Reference direction: the part axis least aligned with the grasp axis, so that
@@ -227,13 +288,23 @@ class AntipodalGraspPlanner(GraspPlanner):
         yy = np.broadcast_to(y[:, None, :], x.shape)
         z = np.cross(x, yy)
         R = np.stack([x, yy, z], axis=-1).reshape(n * k, 3, 3)
-        return R, np.repeat(np.arange(n), k)
+        pair_idx = np.repeat(np.arange(n), k)
+        if len(down) == 0:
+            return R, pair_idx
+        # The grid's random offsets tilt most approaches a few degrees off the vertical of every placement;
+        # a tilted finger reaches lower on one side, and on a low part that is the difference.
+        proj = down[None, :, :] - np.einsum("nj,uj->nu", y, down)[..., None] * y[:, None, :]  # (n, u, 3)
+        norm = np.linalg.norm(proj, axis=2)
+        pi, ui = np.nonzero(norm >= _MIN_STEEPNESS)
+        zr = proj[pi, ui] / norm[pi, ui, None]
+        R_rest = np.stack([np.cross(y[pi], zr), y[pi], zr], axis=-1)
+        return np.concatenate([R, R_rest]), np.concatenate([pair_idx, pi])
 
-    def _pad_support(
-        self, rc: Raycaster, hand: HandSpec, pairs: ContactPairs, R: np.ndarray, pair_idx: np.ndarray
-    ) -> np.ndarray:
+    def _pad_support(self, rc: Raycaster, hand: HandSpec, c0: np.ndarray, c1: np.ndarray, R: np.ndarray) -> np.ndarray:
         """Supported fraction of the worse pad, per candidate; ``-1`` where material protrudes into a pad.
 
+        ``c0``, ``c1``: ``(m, 3)`` pad centres of finger 0 and 1 (part frame,
+        metres), on the contact planes; ``R``: ``(m, 3, 3)`` TCP rotations.
         Each pad point is cast from ``probe`` metres outside the pad plane toward
         the part along the jaw axis: it is supported when it enters the surface
         within ``pad_tolerance`` of the plane; an earlier hit is material in
@@ -247,7 +318,7 @@ class AntipodalGraspPlanner(GraspPlanner):
         probe = s.pad_tolerance + max(s.clearance, 0.002)
         fractions = []
         blocked = np.zeros(len(R), dtype=bool)
-        for contact, sign in ((pairs.p0[pair_idx], 1.0), (pairs.p1[pair_idx], -1.0)):
+        for contact, sign in ((c0, 1.0), (c1, -1.0)):
             direction = sign * y  # finger 0 pushes along +y, finger 1 along -y
             pts = contact[:, None, :] + offsets
             origins = pts - probe * direction[:, None, :]
@@ -261,6 +332,59 @@ class AntipodalGraspPlanner(GraspPlanner):
             blocked |= early.any(axis=1)
             fractions.append(ok.mean(axis=1))
         return np.where(blocked, -1.0, np.minimum(*fractions))
+
+    def _set_backs(
+        self, rc: Raycaster, hand: HandSpec, pairs: ContactPairs, R: np.ndarray, pair_idx: np.ndarray
+    ) -> _Candidates:
+        """Supported candidates: each orientation centred and at its shallowest set-back (module docstring, 6).
+
+        The set-back ``d`` (metres) moves the TCP and both pad centres by
+        ``-d * z``; it ranges over ``[0, pad_size[1] / 2 - pad_inset]`` so the
+        sampled contacts stay under the pads. The shallowest is the largest of
+        ``depth_levels`` even steps with both pads supported, refined by
+        ``depth_refine`` bisections toward the next, unsupported step.
+        """
+        s = self.settings
+        m = len(R)
+        z = R[:, :, 2]
+        c0, c1 = pairs.p0[pair_idx], pairs.p1[pair_idx]
+
+        def support_at(d: np.ndarray, sel: np.ndarray) -> np.ndarray:
+            off = d[:, None] * z[sel]
+            return self._pad_support(rc, hand, c0[sel] - off, c1[sel] - off, R[sel])
+
+        def ok(sup: np.ndarray) -> np.ndarray:
+            return sup >= s.pad_min_support - 1e-9
+
+        everyone = np.arange(m)
+        d_max = max(0.5 * float(hand.pad_size[1]) - s.pad_inset, 0.0)
+        levels = np.linspace(0.0, d_max, s.depth_levels) if s.depth_levels > 1 and d_max > 0 else np.zeros(1)
+        sup = np.stack([support_at(np.full(m, lv), everyone) for lv in levels])  # (levels, m)
+        good = ok(sup)
+        centred = good[0]
+        # The shallowest supported step, refined toward the next (unsupported) one by bisection.
+        top = len(levels) - 1 - np.argmax(good[::-1], axis=0)
+        lo = levels[top].astype(float)
+        lo_sup = sup[top, everyone]
+        idx = np.flatnonzero(good.any(axis=0) & (top < len(levels) - 1))
+        if len(levels) > 1 and len(idx):
+            hi = lo[idx] + (levels[1] - levels[0])
+            for _ in range(s.depth_refine):
+                mid = 0.5 * (lo[idx] + hi)
+                sm = support_at(mid, idx)
+                up = ok(sm)
+                lo[idx[up]], lo_sup[idx[up]] = mid[up], sm[up]
+                hi = np.where(up, hi, mid)
+        deep = good.any(axis=0) & (lo >= _MIN_SET_BACK)
+        keep_c = np.flatnonzero(centred)
+        keep_s = np.flatnonzero(deep)
+        return _Candidates(
+            R=np.concatenate([R[keep_c], R[keep_s]]),
+            pair_idx=np.concatenate([pair_idx[keep_c], pair_idx[keep_s]]),
+            depth=np.concatenate([np.zeros(len(keep_c)), lo[keep_s]]),
+            support=np.concatenate([sup[0, keep_c], lo_sup[keep_s]]),
+            shallow=np.concatenate([np.zeros(len(keep_c), bool), np.ones(len(keep_s), bool)]),
+        )
 
     def _score(
         self,
@@ -287,28 +411,38 @@ class AntipodalGraspPlanner(GraspPlanner):
         part: PartModel,
         hand: HandSpec,
         pairs: ContactPairs,
-        R: np.ndarray,
-        pair_idx: np.ndarray,
+        cand: _Candidates,
         score: np.ndarray,
+        down: np.ndarray,
     ) -> tuple[list[Grasp], int, int]:
-        """Best first: skip near-duplicates of kept grasps, then hand-part collisions.
+        """Round robin over the buckets, best first in each: skip near-duplicates of kept grasps, then collisions.
 
-        Checking duplicates before collisions gives the same set as filtering
-        collisions first (a candidate is only ever compared with kept,
-        collision-free grasps) while calling fcl far less.
+        Each round gives every bucket that still has candidates one kept grasp
+        (:func:`_round_robin_queues`), until ``max_grasps`` are kept. Checking
+        duplicates before collisions gives the same set as filtering collisions
+        first (a candidate is only ever compared with kept, collision-free
+        grasps) while calling fcl far less. The result is sorted by score, best
+        first, ids ``0..n-1``; ``down``: resting directions (part frame).
         """
         s = self.settings
         collider = MeshCollider({"part": (part.mesh, np.eye(4))})
         cos_tol = np.cos(np.radians(s.dedup_angle_deg))
-        order = np.argsort(-score, kind="stable")
+        R = cand.R
+        mid = 0.5 * (pairs.p0 + pairs.p1)[cand.pair_idx]
+        tcp_all = mid - cand.depth[:, None] * R[:, :, 2]
+        # The open hand on its way in: its fingers are what may hit the part (or the table) on the approach.
+        opening = np.minimum(pairs.width[cand.pair_idx] + 2.0 * s.clearance, hand.max_width)
+        if s.approach_opening == "full":
+            opening = np.full(len(R), float(hand.max_width))
+        queues = _round_robin_queues(part, hand, cand, tcp_all, opening, down, score, s.approach_bins)
         kept: list[int] = []
         kept_t = np.zeros((0, 3))
         kept_R = np.zeros((0, 3, 3))
         n_dup = n_col = 0
-        for i in order:
-            j = pair_idx[i]
-            tcp = 0.5 * (pairs.p0[j] + pairs.p1[j])
-            Ri = R[i]
+
+        def accept(i: int) -> bool:
+            nonlocal n_dup, n_col
+            tcp, Ri = tcp_all[i], R[i]
             if len(kept):
                 near = np.linalg.norm(kept_t - tcp, axis=1) < s.dedup_distance
                 if np.any(near):
@@ -319,30 +453,137 @@ class AntipodalGraspPlanner(GraspPlanner):
                     swap = (-d[:, 0] - d[:, 1] + d[:, 2] - 1.0) / 2.0
                     if np.any(np.maximum(same, swap) > cos_tol + 1e-9):  # strictly closer than the angle
                         n_dup += 1
-                        continue
+                        return False
             T = np.eye(4)
             T[:3, :3], T[:3, 3] = Ri, tcp
-            width = float(pairs.width[j])
+            width = float(pairs.width[cand.pair_idx[i]])
             # Closed on the part (fingers just off the contact planes) and open on the way in.
             closed = hand_boxes(hand, width + 2.0 * _CONTACT_GAP)
-            approach = hand_boxes(hand, min(width + 2.0 * s.clearance, hand.max_width), sweep=s.approach_sweep)
+            approach = hand_boxes(hand, float(opening[i]), sweep=s.approach_sweep)
             if collider.collides(closed, T) or collider.collides(approach, T):
                 n_col += 1
-                continue
-            kept.append(int(i))
-            kept_t = np.vstack([kept_t, tcp])
-            kept_R = np.concatenate([kept_R, Ri[None]])
-            if len(kept) >= s.max_grasps:
-                break
-        grasps = [
-            Grasp(
-                id=k,
-                p0=pairs.p0[pair_idx[i]],
-                p1=pairs.p1[pair_idx[i]],
-                R=R[i],
-                width=float(pairs.width[pair_idx[i]]),
-                score=float(score[i]),
+                return False
+            return True
+
+        while queues and len(kept) < s.max_grasps:
+            for q in queues:
+                while q:
+                    i = q.popleft()
+                    if accept(i):
+                        kept.append(i)
+                        kept_t = np.vstack([kept_t, tcp_all[i]])
+                        kept_R = np.concatenate([kept_R, R[i][None]])
+                        break
+                if len(kept) >= s.max_grasps:
+                    break
+            queues = [q for q in queues if q]
+        kept.sort(key=lambda i: (-score[i], i))
+        grasps = []
+        for k, i in enumerate(kept):
+            j = cand.pair_idx[i]
+            off = cand.depth[i] * R[i][:, 2]
+            grasps.append(
+                Grasp(id=k, p0=pairs.p0[j] - off, p1=pairs.p1[j] - off, R=R[i], width=float(pairs.width[j]),
+                      score=float(score[i]))
             )
-            for k, i in enumerate(kept)
-        ]
         return grasps, n_dup, n_col
+
+
+@dataclass
+class _Candidates:
+    """Grasp candidates with supported pads (part frame): rotations, contact pair, set-back and support."""
+
+    R: np.ndarray
+    """``(m, 3, 3)`` TCP rotations."""
+    pair_idx: np.ndarray
+    """``(m,)`` index into the contact pairs."""
+    depth: np.ndarray
+    """``(m,)`` set-back of the TCP along its -z from the contacts' midpoint (metres)."""
+    support: np.ndarray
+    """``(m,)`` supported fraction of the worse pad."""
+    shallow: np.ndarray
+    """``(m,)`` bool: the shallowest set-back (else the pads are centred on the contacts)."""
+
+
+def resting_directions(part: PartModel) -> np.ndarray:
+    """``(u, 3)`` unit vectors into the table (part frame) of the part's stable placements, most probable first.
+
+    The placements are those the regrasp planner rests the part in (``compute_placements``); empty when
+    they cannot be computed.
+    """
+    try:
+        placements = compute_placements(part)
+    except UserError:
+        return np.zeros((0, 3))
+    return np.array([p.T_table_part[:3, :3].T @ np.array([0.0, 0.0, -1.0]) for p in placements]).reshape(-1, 3)
+
+
+def table_gaps(
+    part: PartModel, hand: HandSpec, R: np.ndarray, tcp: np.ndarray, opening: np.ndarray, down: np.ndarray
+) -> np.ndarray:
+    """``(m, u)`` clearance (metres) of the hand above the table with the part in each resting pose.
+
+    ``R``, ``tcp``: ``(m, 3, 3)``, ``(m, 3)`` TCP poses in the part frame; ``opening``: ``(m,)`` jaw
+    openings (metres); ``down``: ``(u, 3)`` resting directions (:func:`resting_directions`). The clearance
+    is the table's height above the hand's lowest point (palm and finger boxes, by the boxes' support
+    functions), both along the resting direction; negative when the hand would enter the table.
+    """
+    m = len(R)
+    if len(down) == 0 or m == 0:
+        return np.zeros((m, len(down)))
+    hull = np.asarray(part.mesh.convex_hull.vertices, dtype=float)
+    table = np.max(hull @ down.T, axis=0)  # (u,) how far the part reaches along each resting direction
+    axes_u = np.einsum("mik,ui->muk", R, down)  # (m, u, 3): each TCP axis along each resting direction
+    low = np.full((m, len(down)), -np.inf)
+    for name, sign in (("palm", 0.0), ("finger0", -1.0), ("finger1", 1.0)):
+        box = next(b for b in hand_boxes(hand, 0.0) if b.name == name)
+        centre = np.broadcast_to(box.center, (m, 3)).copy()
+        centre[:, 1] += sign * 0.5 * opening  # the fingers' inner faces at +-opening / 2
+        reach = np.einsum("mk,muk->mu", centre, axes_u) + np.abs(axes_u) @ (0.5 * box.size)
+        low = np.maximum(low, reach)
+    return table[None, :] - (tcp @ down.T + low)
+
+
+def sphere_directions(n: int) -> np.ndarray:
+    """``(n, 3)`` unit vectors spread evenly over the sphere (a Fibonacci lattice; deterministic)."""
+    i = np.arange(n) + 0.5
+    polar = np.arccos(1.0 - 2.0 * i / n)
+    azimuth = np.pi * (1.0 + np.sqrt(5.0)) * i
+    return np.stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)], axis=1)
+
+
+def _round_robin_queues(
+    part: PartModel,
+    hand: HandSpec,
+    cand: _Candidates,
+    tcp: np.ndarray,
+    opening: np.ndarray,
+    down: np.ndarray,
+    score: np.ndarray,
+    bins: int,
+) -> list[deque[int]]:
+    """Candidate indices per bucket, in the order they are tried; the buckets in the order of their first
+    candidate's score (ties by index everywhere, so the order is deterministic).
+
+    A shallow candidate belongs to the resting pose (``down``) in which its approach is steepest, if
+    within 60 deg of straight down (``_MIN_STEEPNESS``): shallow grasps are there to keep the fingers off
+    the table, so these buckets are taken by the hand's clearance above the table in that pose
+    (:func:`table_gaps`), highest first in ``_GAP_STEP`` steps, then by score. Every other candidate
+    belongs to the nearest of ``bins`` approach directions (centred or shallow apart), best score first.
+    """
+    m = len(score)
+    approach = cand.R[:, :, 2]
+    bucket = np.argmax(approach @ sphere_directions(bins).T, axis=1) * 2 + cand.shallow.astype(int)
+    steps = np.zeros(m)
+    if len(down):
+        cosines = approach @ down.T
+        pose = np.argmax(cosines, axis=1)
+        rest = cand.shallow & (cosines[np.arange(m), pose] >= _MIN_STEEPNESS)
+        gap = table_gaps(part, hand, cand.R[rest], tcp[rest], opening[rest], down)[np.arange(rest.sum()), pose[rest]]
+        bucket[rest] = 2 * bins + pose[rest]
+        steps[rest] = -np.floor(gap / _GAP_STEP)
+    order = np.lexsort((np.arange(m), -score, steps, bucket))
+    starts = np.flatnonzero(np.r_[True, bucket[order][1:] != bucket[order][:-1]])
+    groups = np.split(order, starts[1:])
+    groups.sort(key=lambda g: (-score[g[0]], int(g[0])))
+    return [deque(int(i) for i in g) for g in groups]
