@@ -64,10 +64,6 @@ its hole (demo seeds 16, 25, 28 jammed). With 1.0 the arm settles within 0.1 mra
 position servo does."""
 
 
-SQUEEZE_TIME = 0.3
-"""Seconds the fingers keep closing after both touch the part, at most (they stop when it is centred)."""
-
-
 _EXACT_OBJ: dict[str, str] = {}
 """OBJ text of a parametric part's exact convex pieces, by part hash."""
 
@@ -312,16 +308,6 @@ class PyBulletWorld:
             prev = now
         if body is None or not touching:
             return False
-        # Squeeze on until the fingers stop: the part centres between the pads, as in a real parallel
-        # gripper, instead of being welded wherever the first touch left it.
-        still = 0
-        for _ in range(int(SQUEEZE_TIME / self.time_step)):
-            self.p.stepSimulation()
-            now = self.get_joints(g.finger_joints)
-            still = still + 1 if np.max(np.abs(now - prev)) < 1e-6 else 0
-            prev = now
-            if still >= 12:
-                break
         # Hold the fingers where they touched and weld the part to the TCP so it cannot slip.
         for j, v in zip(ids, self.get_joints(g.finger_joints), strict=True):
             self.p.setJointMotorControl2(self.robot, j, pybullet.POSITION_CONTROL, targetPosition=float(v),

@@ -67,7 +67,7 @@ def _rz(yaw: float) -> np.ndarray:
 @pytest.mark.slow
 def test_fingers_close_together_and_centre_an_off_centre_part() -> None:
     """The jaws are geared like a one-motor parallel gripper: a box 6 mm off the jaw centre is pushed
-    to the centre by the first finger, squeezed by both, and both fingers end equally far in."""
+    to the centre by the first finger until the other touches, and both fingers end equally far in."""
     with NextagePyBullet({}) as robot:
         T_box = np.eye(4)
         T_box[:3, 3] = [0.38, 0.22, 0.02]
