@@ -137,19 +137,32 @@ class _MotionFailure(Exception):
 
 
 def placement_slots(
-    placements: Sequence[Placement], xy: Sequence[float], table_height: float, settings: AssemblySettings
+    placements: Sequence[Placement],
+    xy: Sequence[float],
+    table_height: float,
+    settings: AssemblySettings,
+    first: Sequence[np.ndarray] = (),
 ) -> list[PoseSlot]:
     """Middle-layer slots: the most probable distinct placements at evenly sampled yaws at ``xy``.
 
     Placements that are the same up to the part's own symmetry (a square peg
     lying on any of its four sides) have the same centre-of-mass height,
     support area and margin; only the first of them is kept.
+
+    ``first``: part orientations ``R_world_part`` (3x3) whose placements come
+    first, in the exact variant, whatever their probability: the pose the part
+    rests in at the start and the one it stands in at its goal. The grasp set
+    is not symmetric like the part, so of a peg's four lying placements only
+    the one it lies in shares its grasps from above with the start.
     """
     chosen: list[Placement] = []
     seen: set[tuple[float, float, float]] = set()
-    for p in sorted(placements, key=lambda p: -p.probability):
+    wanted = [p for R in first if (p := _placement_resting_as(placements, R)) is not None]
+    wanted_ids = {p.id for p in wanted}
+    by_probability = sorted(placements, key=lambda p: -p.probability)
+    for p in wanted + by_probability:
         sig = (round(float(p.T_table_part[2, 3]) * 2000.0), round(_area(p.support_polygon) * 1e6), round(p.margin, 3))
-        if sig in seen:
+        if p.id in {c.id for c in chosen} or (sig in seen and p.id not in wanted_ids):
             continue
         seen.add(sig)
         chosen.append(p)
@@ -161,6 +174,17 @@ def placement_slots(
             T = compose(from_rotation(np.eye(3), [xy[0], xy[1], table_height]), rot_z(yaw), p.T_table_part)
             slots.append(PoseSlot(f"placement{p.id}_yaw{round(np.degrees(yaw))}", "middle", T))
     return slots
+
+
+def _placement_resting_as(placements: Sequence[Placement], R_world_part: np.ndarray) -> Placement | None:
+    """The placement whose resting direction (part frame) is the table's down in ``R_world_part``, within 3 deg."""
+    down = np.asarray(R_world_part, float).T @ np.array([0.0, 0.0, -1.0])
+    best, cos = None, np.cos(np.radians(3.0))
+    for p in placements:
+        c = float(down @ (p.T_table_part[:3, :3].T @ np.array([0.0, 0.0, -1.0])))
+        if c > cos:
+            best, cos = p, c
+    return best
 
 
 def _area(polygon: np.ndarray) -> float:

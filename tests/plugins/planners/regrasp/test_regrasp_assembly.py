@@ -63,6 +63,22 @@ def test_placement_slots_skip_placements_equal_under_the_parts_symmetry(peg) -> 
         assert low == pytest.approx(0.0, abs=1e-9)
 
 
+def test_placement_slots_start_with_the_exact_start_and_goal_placements(peg) -> None:
+    """The peg lies on the side its grasps from above belong to, and stands on its shank at its goal
+    (the least probable placement): both come first, ahead of the symmetric lying variant ranked first."""
+    _, _, b = peg
+    placements = compute_placements(b)
+    lying = [p for p in placements if abs(p.T_table_part[2, 3] - 0.020) < 1e-6]
+    shank = min(placements, key=lambda p: p.probability)
+    start = lying[-1]
+    assert start.id != lying[0].id
+    T_goal = geometry.from_rpy(0.0, 0.0, 0.7) @ shank.T_table_part
+    slots = placement_slots(placements, (0.3, 0.2), 0.0, AssemblySettings(max_placements=2, placement_yaws=1),
+                            first=(geometry.from_rpy(0.0, 0.0, -1.1)[:3, :3] @ start.T_table_part[:3, :3],
+                                   T_goal[:3, :3]))
+    assert [s.name for s in slots] == [f"placement{start.id}_yaw0", f"placement{shank.id}_yaw0"]
+
+
 @pytest.mark.slow
 def test_peg_in_hole_plan_is_collision_free_and_ends_assembled(peg_in_hole_plan) -> None:
     task, a, b = peg_in_hole_plan.task, peg_in_hole_plan.a, peg_in_hole_plan.b
