@@ -399,7 +399,7 @@ def _execute(run: _Run, robot: Robot, plan: Plan, stage: str = "execute") -> lis
                     robot.execute(chunk)
                     if record:
                         frames.append(robot.sense_rgb())
-                trace.after_path(seg.trajectory)
+                trace.after_path(seg.trajectory, seg.label)
             elif seg.gripper is not None:
                 ev = seg.gripper
                 close = ev.action == "close"
@@ -420,7 +420,8 @@ class _ExecutionTrace:
 
     One event per gripper action: the part's pose (mm, deg); on close, how far
     it moved since its release (toppled, pushed); on release, how far it
-    slipped in the hand while held and how far it dropped when let go (mm).
+    slipped in the hand while held, the label of the motion before, and how
+    far it dropped when let go (mm).
     """
 
     def __init__(self, robot: Robot) -> None:
@@ -430,13 +431,15 @@ class _ExecutionTrace:
         self.T_tcp_part: dict[str, np.ndarray] = {}  # part -> its pose in the hand at the close
         self.T_released: dict[str, np.ndarray] = {}  # part -> T_world_part after its last release
         self.max_tracking_error = 0.0
+        self.last_path: dict[str, str] = {}  # arm -> label of its last motion
 
     def _tcp(self, arm: str) -> np.ndarray:
         return self.robot.fk(arm, self.robot.current(arm))
 
-    def after_path(self, traj: Any) -> None:
+    def after_path(self, traj: Any, label: str) -> None:
         err = float(np.max(np.abs(self.robot.current(traj.arm) - np.asarray(traj.positions)[-1])))
         self.max_tracking_error = max(self.max_tracking_error, err)
+        self.last_path[traj.arm] = label
 
     def before_grip(self, label: str, arm: str, close: bool, part: str | None) -> None:
         part = part if close else self.held.get(arm)
@@ -450,6 +453,7 @@ class _ExecutionTrace:
             if not close and part in self.T_tcp_part:
                 T_expected = self._tcp(arm) @ self.T_tcp_part[part]
                 ev["slip_in_hand_mm"] = round(1000.0 * geometry.translation_distance(T, T_expected), 2)
+                ev["after"] = self.last_path.get(arm, "")
         self.events.append(ev)
 
     def after_grip(self, arm: str, close: bool, part: str | None) -> None:
@@ -516,8 +520,24 @@ def _measure(run: _Run, robot: Robot, learned: AssemblyTask, true_task: Assembly
             raise StageFailed(
                 f"assembled outside tolerance: B in A off by {vs_taught['position_mm']:.2f} mm / "
                 f"{vs_taught['angle_deg']:.2f} deg (limits {ex.success_position_mm} mm / {ex.success_angle_deg} deg), "
-                f"A {a_goal_mm:.2f} mm from its goal (limit {ex.success_a_goal_mm} mm)"
+                f"A {a_goal_mm:.2f} mm from its goal (limit {ex.success_a_goal_mm} mm)" + _worst_slip(run.report)
             )
+
+
+SLIP_NOTE_MM = 1.0
+"""A part this far (mm) from where the hand should hold it at its release was pushed in the hand: the motion
+before the release met resistance (a jam on an insertion, a collision); the failure reason names it."""
+
+
+def _worst_slip(report: RunReport) -> str:
+    """``"; <part> was pushed N mm in the hand before '<release>'"`` for the worst such release, else ``""``."""
+    events = [ev for st in report.stages if st.stage in ("execute_a", "execute")
+              for ev in (st.details or {}).get("trace", []) if ev.get("slip_in_hand_mm", 0.0) > SLIP_NOTE_MM]
+    if not events:
+        return ""
+    ev = max(events, key=lambda e: e["slip_in_hand_mm"])
+    return (f"; {ev.get('part', 'the part')} was pushed {ev['slip_in_hand_mm']:.1f} mm in the hand by "
+            f"{ev.get('after') or ev['label']!r} (it met resistance there: a jam, if that is the insertion)")
 
 
 def _write_animation(run: _Run, frames: list[np.ndarray]) -> None:
