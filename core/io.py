@@ -23,6 +23,7 @@ from asmteach.core.errors import UserError
 __all__ = [
     "append_jsonl",
     "atomic_path",
+    "cache_root",
     "read_jsonl",
     "read_yaml",
     "to_jsonable",
@@ -31,6 +32,17 @@ __all__ = [
     "write_model",
     "write_text",
 ]
+
+
+def cache_root() -> Path:
+    """Folder of asmteach's on-disk caches (view databases, grasp sets).
+
+    ``$ASMTEACH_CACHE_DIR`` when set, else ``$XDG_CACHE_HOME/asmteach``, else
+    ``~/.cache/asmteach``. Everything in it can be deleted; it is rebuilt on demand.
+    """
+    if os.environ.get("ASMTEACH_CACHE_DIR"):
+        return Path(os.environ["ASMTEACH_CACHE_DIR"])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "asmteach"
 
 
 @contextlib.contextmanager

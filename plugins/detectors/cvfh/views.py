@@ -20,7 +20,6 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,7 +29,7 @@ from pydantic import Field
 
 from asmteach.core import geometry
 from asmteach.core.errors import UserError
-from asmteach.core.io import atomic_path
+from asmteach.core.io import atomic_path, cache_root
 from asmteach.core.models import StrictModel
 from asmteach.plugins.detectors.cvfh.segment import to_o3d
 from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings, look_at
@@ -76,7 +75,7 @@ class ViewSettings(StrictModel):
         "scenes better (measured: 94% vs 75% of scenes get a hypothesis within 25 deg from the 10 nearest views)",
     )
     seed: int = Field(0, ge=0, description="noise seed of noisy views")
-    cache_dir: str | None = Field(None, description="database folder; default ~/.cache/asmteach/cvfh_views")
+    cache_dir: str | None = Field(None, description="database folder; default cvfh_views in asmteach's cache root")
 
 
 @dataclass
@@ -137,9 +136,8 @@ _ARRAYS = ("T_acam_part", "centroids", "crh", "hists", "region_view", "region_ce
 
 
 def default_cache_dir() -> Path:
-    """``$XDG_CACHE_HOME/asmteach/cvfh_views`` (``~/.cache`` when unset)."""
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "asmteach" / "cvfh_views"
+    """``cvfh_views`` in :func:`asmteach.core.io.cache_root` (``$ASMTEACH_CACHE_DIR``, ``$XDG_CACHE_HOME``)."""
+    return cache_root() / "cvfh_views"
 
 
 def normalize_hist(h: np.ndarray) -> np.ndarray:

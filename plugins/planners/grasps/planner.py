@@ -53,7 +53,6 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import os
 import time
 from collections import deque
 from dataclasses import dataclass
@@ -65,7 +64,7 @@ from pydantic import Field, ValidationError
 
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import GraspPlanner, PartModel
-from asmteach.core.io import write_json
+from asmteach.core.io import cache_root, write_json
 from asmteach.core.models import Grasp, HandSpec, StrictModel
 from asmteach.core.parts import mesh_hash
 from asmteach.plugins.planners.grasps.antipodal import antipodal_angles, friction_half_angle
@@ -138,9 +137,8 @@ class AntipodalSettings(StrictModel):
 
 
 def default_cache_dir() -> Path:
-    """``$ASMTEACH_CACHE_DIR/grasps`` or ``~/.cache/asmteach/grasps``."""
-    base = os.environ.get("ASMTEACH_CACHE_DIR") or Path.home() / ".cache" / "asmteach"
-    return Path(base) / "grasps"
+    """``grasps`` in :func:`asmteach.core.io.cache_root` (``$ASMTEACH_CACHE_DIR``, ``$XDG_CACHE_HOME``)."""
+    return cache_root() / "grasps"
 
 
 class AntipodalGraspPlanner(GraspPlanner):
