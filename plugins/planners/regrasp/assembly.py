@@ -20,7 +20,7 @@ from __future__ import annotations
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import networkx as nx
@@ -32,6 +32,7 @@ from asmteach.core.interfaces import MotionPlanner, Obstacle, PartModel, Robot
 from asmteach.core.models import Grasp, GripperEvent, Placement, StrictModel
 from asmteach.plugins.planners.motion.batch import batched
 from asmteach.plugins.planners.motion.interpolate import densify
+from asmteach.plugins.planners.motion.query import FailureKind
 from asmteach.plugins.planners.motion.trrt import inverse_clearance_cost
 from asmteach.plugins.planners.regrasp.feasibility import (
     ScreenSettings,
@@ -75,6 +76,10 @@ class AssemblySettings(StrictModel):
     placement_yaws: int = Field(4, ge=1, le=24, description="evenly sampled yaws per stable placement")
     max_placements: int = Field(4, ge=0, le=32, description="most probable placements used as middle layers")
     max_candidates: int = Field(40, ge=1, le=500, description="grasps solved by IK per slot after screening")
+    max_candidates_wide: int = Field(
+        80, ge=1, le=1000,
+        description="when no keyframe path exists, the search is tried once more with every placement (symmetric "
+        "duplicates too) and this many grasps solved per slot")
     min_down: float = Field(0.3, ge=-1.0, le=1.0, description="cosine: approach to a part on the table from above")
     pregrasp_distance: float = Field(0.06, gt=0.0, description="approach stand-off along the TCP -z")
     lift: float = Field(0.08, gt=0.0, description="lift above the table after grasping / before placing")
@@ -128,12 +133,13 @@ class TransferResult:
 
 
 class _MotionFailure(Exception):
-    """A keyframe motion failed; ``edge`` is the graph edge to ban."""
+    """A keyframe motion failed; ``edge`` is the graph edge to ban, ``node`` a node whose every edge is banned."""
 
-    def __init__(self, edge: tuple[Any, Any], reason: str) -> None:
+    def __init__(self, edge: tuple[Any, Any], reason: str, node: Any | None = None) -> None:
         super().__init__(reason)
         self.edge = edge
         self.reason = reason
+        self.node = node
 
 
 def placement_slots(
@@ -142,6 +148,7 @@ def placement_slots(
     table_height: float,
     settings: AssemblySettings,
     first: Sequence[np.ndarray] = (),
+    every: bool = False,
 ) -> list[PoseSlot]:
     """Middle-layer slots: the most probable distinct placements at evenly sampled yaws at ``xy``.
 
@@ -154,6 +161,9 @@ def placement_slots(
     rests in at the start and the one it stands in at its goal. The grasp set
     is not symmetric like the part, so of a peg's four lying placements only
     the one it lies in shares its grasps from above with the start.
+
+    ``every``: all placements, symmetric duplicates included, whatever
+    ``max_placements`` says (the planner's second try).
     """
     chosen: list[Placement] = []
     seen: set[tuple[float, float, float]] = set()
@@ -162,11 +172,12 @@ def placement_slots(
     by_probability = sorted(placements, key=lambda p: -p.probability)
     for p in wanted + by_probability:
         sig = (round(float(p.T_table_part[2, 3]) * 2000.0), round(_area(p.support_polygon) * 1e6), round(p.margin, 3))
-        if p.id in {c.id for c in chosen} or (sig in seen and p.id not in wanted_ids):
+        if p.id in {c.id for c in chosen} or (sig in seen and p.id not in wanted_ids and not every):
             continue
         seen.add(sig)
         chosen.append(p)
-    chosen = chosen[: settings.max_placements]
+    if not every:
+        chosen = chosen[: settings.max_placements]
     slots = []
     for p in chosen:
         for k in range(settings.placement_yaws):
@@ -224,7 +235,7 @@ def plan_transfer(
     *,
     T_start: np.ndarray,
     goal: PlaceGoal,
-    middle_slots: Callable[[], Sequence[PoseSlot]],
+    middle_slots: Callable[[bool], Sequence[PoseSlot]],
     world: Sequence[Obstacle],
     q_now: dict[str, np.ndarray],
     settings: AssemblySettings,
@@ -233,8 +244,10 @@ def plan_transfer(
     """Move ``part`` from ``T_start`` to ``goal``; the arms end at home.
 
     ``world`` holds the table (named ``"table"``) and the other obstacles,
-    not this part. ``middle_slots`` is called only if intermediate placements
-    are needed. Paths are untimed; see :func:`asmteach.plugins.planners.regrasp.plan_io.to_plan`.
+    not this part. ``middle_slots(every)`` is called only if intermediate
+    placements are needed: first the chosen few, then, if the search
+    still fails, every placement (``every=True``). Paths are untimed; see
+    :func:`asmteach.plugins.planners.regrasp.plan_io.to_plan`.
     """
     t0 = time.perf_counter()
     by_id = _grasp_dict(grasps)
@@ -260,7 +273,20 @@ def plan_transfer(
     layers: list[GraspFeasibility] = [start, end]
     stats: dict[str, Any] = {"feasible": {"start": len(start.solutions), "goal": len(end.solutions)}}
     G = build_regrasp_graph(layers, regrasp_penalty=settings.regrasp_penalty, motion_weight=settings.motion_weight)
-    middle_done = False
+    middle_done = widened = False
+    slots: list[PoseSlot] = []
+
+    def middle_layers(slots: list[PoseSlot], prefer: set[int]) -> list[GraspFeasibility]:
+        screens = [screen_slot(slot, grasps, collider, robot.hand, screen) for slot in slots]
+        total = Counter(g.id for passed, _ in screens for g in passed)
+        _set_world(robot, world)  # a failed realisation may have left other obstacles or a held part
+        for arm in arms:
+            robot.attach(arm, None)
+        shared = [{gid: n - (gid in {g.id for g in passed}) for gid, n in total.items()}
+                  for passed, _ in screens]  # per slot: the other slots passing each grasp
+        return evaluate_slots(robot, slots, screens, arms, settings=screen, prefer=prefer, shared=shared,
+                              seeds=seeds)
+
     banned: list[tuple[Any, Any]] = []
     last_reason: str | None = None
     stats["graph_seconds"] = time.perf_counter() - t0
@@ -273,17 +299,8 @@ def plan_transfer(
         stats["search_seconds"] += time.perf_counter() - ts
         if not search.success and not middle_done and settings.max_placements > 0:
             tg = time.perf_counter()
-            prefer = {vid // 2 for f in layers for vid, _ in f.solutions}
-            slots = list(middle_slots())
-            screens = [screen_slot(slot, grasps, collider, robot.hand, screen) for slot in slots]
-            total = Counter(g.id for passed, _ in screens for g in passed)
-            _set_world(robot, world)  # a failed realisation may have left other obstacles or a held part
-            for arm in arms:
-                robot.attach(arm, None)
-            shared = [{gid: n - (gid in {g.id for g in passed}) for gid, n in total.items()}
-                      for passed, _ in screens]  # per slot: the other slots passing each grasp
-            layers += evaluate_slots(robot, slots, screens, arms, settings=screen, prefer=prefer, shared=shared,
-                                     seeds=seeds)
+            slots = list(middle_slots(False))
+            layers += middle_layers(slots, {vid // 2 for f in layers for vid, _ in f.solutions})
             stats["feasible"]["middle"] = sum(len(f.solutions) for f in layers[2:])
             G = build_regrasp_graph(
                 layers, regrasp_penalty=settings.regrasp_penalty, motion_weight=settings.motion_weight
@@ -292,6 +309,30 @@ def plan_transfer(
             stats["graph_seconds"] += time.perf_counter() - tg
             if progress:
                 progress(f"{part.name}: no direct grasp; {len(layers) - 2} intermediate placements added")
+            continue
+        if not search.success and not widened and settings.max_placements > 0:
+            # Turning a part over takes grasps that two placements share, and there are few: only grasps
+            # solved by IK make nodes, the cap per slot can leave them out, and so can the choice of one
+            # of a symmetric part's equal placements. Once: every placement, more grasps solved per slot.
+            tg = time.perf_counter()
+            widened = middle_done = True
+            screen = replace(screen, max_candidates=max(settings.max_candidates_wide, screen.max_candidates))
+            slots = list(middle_slots(True))
+            _set_world(robot, world)
+            for arm in arms:
+                robot.attach(arm, None)
+            start = evaluate(start_slot)
+            end = evaluate(goal.slot, goal.on_table, prefer={vid // 2 for vid, _ in start.solutions})
+            layers = [start, end, *middle_layers(slots, {vid // 2 for f in (start, end) for vid, _ in f.solutions})]
+            stats["feasible"] = {"start": len(start.solutions), "goal": len(end.solutions),
+                                 "middle": sum(len(f.solutions) for f in layers[2:]), "widened": True}
+            G = build_regrasp_graph(
+                layers, regrasp_penalty=settings.regrasp_penalty, motion_weight=settings.motion_weight
+            )
+            stats["graph_seconds"] += time.perf_counter() - tg
+            if progress:
+                progress(f"{part.name}: no keyframe path; all {len(slots)} placement slots, "
+                         f"{screen.max_candidates} grasps solved per slot")
             continue
         stats["graph_nodes"] = G.number_of_nodes() - 2
         stats["graph_edges"] = G.number_of_edges()
@@ -310,6 +351,8 @@ def plan_transfer(
         except _MotionFailure as fail:
             stats["motion_seconds"] += time.perf_counter() - tm
             banned.append(fail.edge)
+            if fail.node is not None and fail.node in G:
+                banned += list(G.edges(fail.node))
             last_reason = fail.reason
             if progress:
                 progress(f"{part.name}: {fail.reason}; searching again")
@@ -517,7 +560,10 @@ def _free(
     res = planner.plan(np.asarray(q_a, float), np.asarray(q_b, float), lower=lo, upper=hi, is_valid=chk.valid,
                        cost=chk.cost, time_limit=settings.motion_time_limit)
     if not res.success or res.path is None:
-        raise _MotionFailure(edge, f"{what}: {res.reason}")
+        # The goal configuration itself is in collision (a held part against the robot, say): no motion
+        # to it can succeed, whatever edge leads there.
+        bad_goal = edge[1] if str(res.reason).startswith(FailureKind.GOAL_INVALID.value) else None
+        raise _MotionFailure(edge, f"{what}: {res.reason}", node=bad_goal)
     path = np.asarray(res.path, float)
     # clearance of the free motion in the world it was planned in, every 0.05 rad (for the statistics)
     clearances.append(float(np.min(robot.clearance(arm, densify(path, 0.05)))))

@@ -84,8 +84,8 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
             robot, motion_planner, a, problem.grasps_a,
             T_start=problem.T_world_a,
             goal=PlaceGoal(PoseSlot("goal", "goal", goal.T_world_a), np.array([0.0, 0.0, s.lift])),
-            middle_slots=lambda: placement_slots(compute_placements(a), start_a[:2], h, s,
-                                                 first=(problem.T_world_a[:3, :3], goal.T_world_a[:3, :3])),
+            middle_slots=lambda every: placement_slots(compute_placements(a), start_a[:2], h, s, every=every,
+                                                       first=(problem.T_world_a[:3, :3], goal.T_world_a[:3, :3])),
             world=world_a, q_now=q_home, settings=s, progress=progress,
         )
         details["a"] = res_a
@@ -99,8 +99,8 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
             T_start=problem.T_world_b,
             goal=PlaceGoal(PoseSlot("assembled", "goal", goal.T_world_b), -s.retract * goal.v_world,
                            touch=(a.name, "table"), on_table=False),
-            middle_slots=lambda: placement_slots(compute_placements(b), start_b[:2], h, s,
-                                                 first=(problem.T_world_b[:3, :3], goal.T_world_b[:3, :3])),
+            middle_slots=lambda every: placement_slots(compute_placements(b), start_b[:2], h, s, every=every,
+                                                       first=(problem.T_world_b[:3, :3], goal.T_world_b[:3, :3])),
             world=world_b, q_now=res_a.q_end, settings=s, progress=progress,
         )
         details["b"] = res_b

@@ -79,6 +79,16 @@ def test_placement_slots_start_with_the_exact_start_and_goal_placements(peg) -> 
     assert [s.name for s in slots] == [f"placement{start.id}_yaw0", f"placement{shank.id}_yaw0"]
 
 
+def test_placement_slots_every_keeps_symmetric_duplicates(peg) -> None:
+    """The planner's second try: every placement, the four equal lying ones of the peg included."""
+    _, _, b = peg
+    placements = compute_placements(b)
+    slots = placement_slots(placements, (0.3, 0.2), 0.0, AssemblySettings(max_placements=1, placement_yaws=2),
+                            every=True)
+    assert sorted({s.name.split("_yaw")[0] for s in slots}) == sorted(f"placement{p.id}" for p in placements)
+    assert len(slots) == 2 * len(placements)
+
+
 @pytest.mark.slow
 def test_peg_in_hole_plan_is_collision_free_and_ends_assembled(peg_in_hole_plan) -> None:
     task, a, b = peg_in_hole_plan.task, peg_in_hole_plan.a, peg_in_hole_plan.b
