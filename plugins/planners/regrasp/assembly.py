@@ -67,7 +67,8 @@ __all__ = [
 class AssemblySettings(StrictModel):
     """How keyframes and motions are chosen. Distances in metres, angles in radians, times in seconds."""
 
-    retract: float = Field(0.05, gt=0.0, le=0.5, description="pre-assembly retraction of B along -v_a")
+    retract: float = Field(
+        0.05, gt=0.0, le=0.5, description="pre-assembly retraction of B along -v_a, metres; more where B is still in A")
     vertical_snap_deg: float = Field(
         2.0, ge=0.0, le=10.0,
         description="a taught v_a this close to straight down at A's goal is made straight down, degrees (0: off)")

@@ -5,7 +5,8 @@ table; of the placements, the one that makes B's insertion most nearly
 vertical (``v_a`` pointing down in the world) is preferred, so the
 insertion is a straight move down, with B wholly above the table. B's goal
 is ``T_world_A @ T_A_B``; its pre-assembly pose is that goal moved back
-along ``-v_a`` by the retraction distance (the paper's narrow-passage fix).
+along ``-v_a`` by the retraction distance (the paper's narrow-passage fix),
+or further where B would otherwise still be inside A (:func:`clear_retraction`).
 
 A taught ``v_a`` within :data:`VERTICAL_SNAP` of the table normal at the
 chosen placement is taken as exactly vertical: the insertion line passes
@@ -31,7 +32,7 @@ from asmteach.core.geometry import compose, from_rotation, rot_z
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import AssemblyTask, Placement
 
-__all__ = ["VERTICAL_SNAP", "AssemblyGoal", "choose_assembly_goal"]
+__all__ = ["CLEAR_MARGIN", "VERTICAL_SNAP", "AssemblyGoal", "choose_assembly_goal", "clear_retraction"]
 
 VERTICAL_SNAP = float(np.radians(2.0))
 """Radians: a taught insertion direction this close to straight down at A's goal placement is made straight
@@ -82,7 +83,7 @@ def choose_assembly_goal(
         if float(np.arccos(np.clip(-v_w[2], -1.0, 1.0))) <= vertical_snap:
             v_w = np.array([0.0, 0.0, -1.0])  # teaching noise, not a slanted insertion (module docstring)
         T_pre = T_b.copy()
-        T_pre[:3, 3] -= retract * v_w
+        T_pre[:3, 3] -= max(retract, clear_retraction(part_a, part_b, T_a, T_b, v_w)) * v_w
         low_b = min(_lowest(part_b, T_b), _lowest(part_b, T_pre))
         if low_b < table_height - 1e-4:
             continue
@@ -97,6 +98,26 @@ def choose_assembly_goal(
             "check T_A_B and v_a of the structure"
         )
     return best[1]
+
+
+CLEAR_MARGIN = 0.005
+"""Metres B stays clear of A along the insertion at its pre-assembly pose."""
+
+
+def clear_retraction(
+    part_a: PartModel, part_b: PartModel, T_world_a: np.ndarray, T_world_b: np.ndarray, v_world: np.ndarray
+) -> float:
+    """Metres B must move back along ``-v_world`` from ``T_world_b`` to be wholly outside A, plus a margin.
+
+    B is clear of A once their extents along the insertion line no longer overlap: B's
+    vertices all lie at least :data:`CLEAR_MARGIN` behind A's hindmost vertex. A fixed retraction
+    leaves a slider longer than it still in its slot, and the carry to the pre-assembly pose
+    then has to thread a 0.5 mm clearance.
+    """
+    back = -np.asarray(v_world, float)
+    a = part_a.mesh.vertices @ T_world_a[:3, :3].T @ back + T_world_a[:3, 3] @ back
+    b = part_b.mesh.vertices @ T_world_b[:3, :3].T @ back + T_world_b[:3, 3] @ back
+    return float(a.max() - b.min()) + CLEAR_MARGIN
 
 
 def _lowest(part: PartModel, T_world_part: np.ndarray) -> float:

@@ -94,11 +94,12 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         # Part B: A stands at its goal; B may touch A (and the table) on the insertion only.
         world_b = [table, Obstacle(a.name, a.mesh, goal.T_world_a)]
         start_b = problem.T_world_b[:3, 3]
+        back = goal.T_world_b_pre[:3, 3] - goal.T_world_b[:3, 3]  # the retraction, along -v_world
         res_b = plan_transfer(
             robot, motion_planner, b, problem.grasps_b,
             T_start=problem.T_world_b,
-            goal=PlaceGoal(PoseSlot("assembled", "goal", goal.T_world_b), -s.retract * goal.v_world,
-                           touch=(a.name, "table"), on_table=False),
+            goal=PlaceGoal(PoseSlot("assembled", "goal", goal.T_world_b), back, touch=(a.name, "table"),
+                           on_table=False),
             middle_slots=lambda every: placement_slots(compute_placements(b), start_b[:2], h, s, every=every,
                                                        first=(problem.T_world_b[:3, :3], goal.T_world_b[:3, :3])),
             world=world_b, q_now=res_a.q_end, settings=s, progress=progress,

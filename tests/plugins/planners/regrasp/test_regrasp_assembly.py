@@ -51,6 +51,30 @@ def test_a_taught_insertion_a_degree_off_vertical_goes_straight_down(peg, tilt_d
     assert np.degrees(np.arccos(-off.v_world[2])) == pytest.approx(tilt_deg, abs=1e-6)
 
 
+def test_a_slider_longer_than_the_retraction_is_retracted_clear_of_its_slot() -> None:
+    """A 60 mm slider pushed 60 mm along -x into a 90 mm block: 50 mm back would leave it 10 mm in its slot."""
+    from asmteach.core.models import AssemblyTask, PartSpec, Primitive, SolidSpec
+
+    def spec(name: str, size: list[float], **kw) -> PartSpec:
+        box = Primitive(shape="box", size=size, pose={"xyz": [0, 0, size[2] / 2]})
+        return PartSpec(name=name, solid=SolidSpec(add=[box], **kw))
+
+    block = spec("slot_block", [0.090, 0.060, 0.040],
+                 subtract=[Primitive(shape="box", size=[0.100, 0.021, 0.020], pose={"xyz": [0, 0, 0.035]})])
+    slider = spec("slider", [0.060, 0.020, 0.020])
+    task = AssemblyTask(name="slide", part_a=block, part_b=slider, T_A_B={"xyz": [-0.015, 0, 0.025]}, v_a=[-1, 0, 0])
+    a, b = build_part(block), build_part(slider)
+    goal = choose_assembly_goal(a, b, task, compute_placements(a), xy=(0.4, 0.0), yaw=0.0, table_height=0.0,
+                                retract=0.05)
+    back = goal.T_world_b_pre[:3, 3] - goal.T_world_b[:3, 3]
+    # along the insertion line, B's rear end (0.030 behind its origin at -0.015) passes A's end (+0.045)
+    # by the 5 mm margin: 0.095 m back, whichever way A stands
+    np.testing.assert_allclose(back, -0.095 * goal.v_world, atol=1e-9)
+    pre_b = geometry.transform_points(goal.T_world_b_pre, b.mesh.vertices) @ -goal.v_world
+    at_a = geometry.transform_points(goal.T_world_a, a.mesh.vertices) @ -goal.v_world
+    assert pre_b.min() == pytest.approx(at_a.max() + 0.005, abs=1e-9)
+
+
 def test_placement_slots_skip_placements_equal_under_the_parts_symmetry(peg) -> None:
     _, _, b = peg
     placements = compute_placements(b)  # square head: four lying placements are one
