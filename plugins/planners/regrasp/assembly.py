@@ -476,13 +476,13 @@ def _realise(
         T_grasp = slot_pick.T_world_part @ variant_tcp(grasps, vid)
         pre = robot.ik(arm, approach_offset(T_grasp, settings.pregrasp_distance), q_seed=G.nodes[pick]["q"])
         if not pre.success or pre.q is None or getattr(pre, "flipped", False):
-            raise _MotionFailure((into, pick), f"pre-grasp pose at {pick[0]} has no IK solution")
+            raise _MotionFailure((into, pick), f"pre-grasp pose at {pick[0]} has no IK solution", node=pick)
         steps.append(Step(f"move to pre-grasp {vid} of {part.name} at {pick[0]}", "path", arm,
                           plan_free(q_cur[arm], pre.q, (into, pick), f"motion to the pre-grasp at {pick[0]}")))
         keyframes.append({"name": f"pregrasp_{pick[0]}", "arm": arm, "q": np.asarray(pre.q).tolist()})
         # 2. straight approach without the part as obstacle (the fingers go around it)
         _set_world(robot, world)
-        down = _line(robot, chk, arm, pre.q, T_grasp, settings, (into, pick), f"approach at {pick[0]}")
+        down = _line(robot, chk, arm, pre.q, T_grasp, settings, (into, pick), f"approach at {pick[0]}", node=pick)
         steps.append(Step(f"approach grasp {vid}", "path", arm, down))
         keyframes.append({"name": f"grasp_{pick[0]}", "arm": arm, "q": down[-1].tolist()})
         steps.append(Step(f"close on {part.name}", "gripper", arm,
@@ -494,7 +494,7 @@ def _realise(
         T_lift = T_tcp_now.copy()
         T_lift[2, 3] += settings.lift
         up = _line(robot, chk, arm, down[-1], T_lift, settings, (pick, nodes[i + 1]), f"lift at {pick[0]}",
-                   ignore=("table",))
+                   ignore=("table",), node=pick)
         steps.append(Step(f"lift {part.name}", "path", arm, up))
         # 4. carry to the start of the final straight move
         T_place_tcp = slot_place.T_world_part @ variant_tcp(grasps, vid)
@@ -503,7 +503,7 @@ def _realise(
         T_above[:3, 3] += approach
         above = robot.ik(arm, T_above, q_seed=G.nodes[place]["q"])
         if not above.success or above.q is None or getattr(above, "flipped", False):
-            raise _MotionFailure((pick, nodes[i + 1]), f"no IK solution above {place[0]}")
+            raise _MotionFailure((pick, nodes[i + 1]), f"no IK solution above {place[0]}", node=place)
         steps.append(Step(f"carry {part.name} to {place[0]}", "path", arm,
                           plan_free(up[-1], above.q, (pick, nodes[i + 1]), f"carrying {part.name} to {place[0]}")))
         keyframes.append({"name": f"{'preassembly' if final and not goal.on_table else 'above'}_{place[0]}",
@@ -514,7 +514,8 @@ def _realise(
         if goal.on_table or not final:
             T_release[2, 3] += settings.release_gap
         last = _line(robot, chk, arm, above.q, T_release, settings, (pick, nodes[i + 1]),
-                     f"{'insertion' if final and not goal.on_table else 'placing'} at {place[0]}", ignore=touch)
+                     f"{'insertion' if final and not goal.on_table else 'placing'} at {place[0]}", ignore=touch,
+                     node=place)
         steps.append(Step(f"{'insert' if final and not goal.on_table else 'place'} {part.name} at {place[0]}",
                           "path", arm, last))
         keyframes.append({"name": f"placed_{place[0]}", "arm": arm, "q": last[-1].tolist()})
@@ -524,7 +525,7 @@ def _realise(
         T_part = slot_place.T_world_part
         back = _line(robot, chk, arm, last[-1],
                      approach_offset(robot.fk(arm, last[-1]), settings.pregrasp_distance), settings,
-                     (pick, nodes[i + 1]), f"retreat at {place[0]}")
+                     (pick, nodes[i + 1]), f"retreat at {place[0]}", node=place)
         steps.append(Step("retreat", "path", arm, back))
         q_cur[arm] = back[-1]
         i = j + 1  # the edge after a hold is a transit (regrasp at that slot) or the end
@@ -581,13 +582,15 @@ def _line(
     edge: tuple[Any, Any],
     what: str,
     ignore: Sequence[str] = (),
+    node: Any | None = None,
 ) -> np.ndarray:
+    """A straight TCP line; on failure ``node``, the grasp at the slot the line belongs to, is banned whole."""
     path, why = cartesian_path(robot, arm, np.asarray(q_from, float), T_to, settings.cartesian_step)
     if path is None:
-        raise _MotionFailure(edge, f"{what}: {why}")
+        raise _MotionFailure(edge, f"{what}: {why}", node=node)
     hit = chk.first_hit(path, ignore=ignore)
     if hit is not None:
         pairs = robot.collision_report(arm, path[hit])
         who = ", ".join(f"{a}/{b}" for a, b in pairs[:2]) or "unknown pair"
-        raise _MotionFailure(edge, f"{what}: collision at step {hit} ({who})")
+        raise _MotionFailure(edge, f"{what}: collision at step {hit} ({who})", node=node)
     return path
