@@ -443,7 +443,8 @@ def _num(v: Any) -> float | None:
 
 
 def group_table(rows: list[dict[str, Any]], keys: Iterable[str]) -> list[dict[str, Any]]:
-    """Per grid point: trial count, success rate and median / max of each numeric metric."""
+    """Per grid point: trial count, the rate of trials that ran (``ok_rate``), the rate of each yes/no
+    metric (``success_rate``) and the median / max of each numeric one."""
     import numpy as np
 
     keys = list(keys)
@@ -458,6 +459,10 @@ def group_table(rows: list[dict[str, Any]], keys: Iterable[str]) -> list[dict[st
         rec["ok_rate"] = round(sum(bool(m["ok"]) for m in members) / len(members), 4)
         metric_names = [k for k in members[0] if k not in (*keys, "seed", "ok", "error")]
         for name in metric_names:
+            flags = [m.get(name) for m in members if isinstance(m.get(name), bool)]
+            if flags and len(flags) == sum(m.get(name) is not None for m in members):
+                rec[f"{name}_rate"] = round(sum(flags) / len(flags), 4)  # a yes/no result: how often yes
+                continue
             vals = [x for x in (_num(m.get(name)) for m in members) if x is not None]
             if vals:
                 rec[f"{name}_median"] = round(float(np.median(vals)), 6)
@@ -512,7 +517,8 @@ def summarize(rows: list[dict[str, Any]], out: Path, kind: Experiment, *, title:
     if not any(Path(p).suffix.lower() in IMAGE_SUFFIXES for p in own):
         plot = summary_plot(rows, out, title=title or type(kind).__name__, metrics=kind.plot_metrics)
     n_ok = sum(bool(r.get("ok")) for r in rows)
-    md = f"# Sweep summary\n\n{len(rows)} trials, {n_ok} succeeded.\n\n" + to_markdown(table)
+    md = (f"# Sweep summary\n\n{len(rows)} trials, {n_ok} ran to the end ({len(rows) - n_ok} raised an error); "
+          "a trial's own verdict is among its metrics.\n\n" + to_markdown(table))
     if plot is not None:
         md += f"\n![summary]({plot.name})\n"
     failures = [r for r in rows if not r.get("ok")]

@@ -8,7 +8,7 @@ import pytest
 from asmteach.core.cli import main
 from asmteach.core.errors import UserError
 from asmteach.core.io import read_jsonl
-from asmteach.core.sweep import run_sweep
+from asmteach.core.sweep import group_table, run_sweep
 
 
 @pytest.fixture
@@ -70,3 +70,11 @@ def test_bad_grid_key_is_a_user_error(tmp_path, toy_dist):
         run_sweep(path, tmp_path / "o", progress=False)
     path.write_text("experiment: toy_squar\n")
     assert main(["sweep", str(path), "--out", str(tmp_path / "o")]) == 2
+
+
+def test_summary_gives_a_yes_no_metric_as_a_rate_and_numbers_as_median_and_max():
+    rows = [{"point": {}, "seed": s, "ok": True, "metrics": {"success": s != 2, "error_mm": float(s)}}
+            for s in range(4)]
+    (rec,) = group_table(rows, [])
+    assert rec["success_rate"] == 0.75 and "success_median" not in rec
+    assert rec["error_mm_median"] == 1.5 and rec["error_mm_max"] == 3.0
