@@ -381,7 +381,6 @@ class AntipodalGraspPlanner(GraspPlanner):
             pair_idx=np.concatenate([pair_idx[keep_c], pair_idx[keep_s]]),
             depth=np.concatenate([np.zeros(len(keep_c)), lo[keep_s]]),
             support=np.concatenate([sup[0, keep_c], lo_sup[keep_s]]),
-            shallow=np.concatenate([np.zeros(len(keep_c), bool), np.ones(len(keep_s), bool)]),
         )
 
     def _score(
@@ -499,8 +498,11 @@ class _Candidates:
     """``(m,)`` set-back of the TCP along its -z from the contacts' midpoint (metres)."""
     support: np.ndarray
     """``(m,)`` supported fraction of the worse pad."""
-    shallow: np.ndarray
-    """``(m,)`` bool: the shallowest set-back (else the pads are centred on the contacts)."""
+
+    @property
+    def shallow(self) -> np.ndarray:
+        """``(m,)`` bool: at the shallowest set-back (else the pads are centred on the contacts)."""
+        return self.depth > 0.0
 
 
 def resting_directions(part: PartModel) -> np.ndarray:

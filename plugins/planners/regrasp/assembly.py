@@ -265,15 +265,22 @@ def plan_transfer(
         screened = screen_slot(slot, grasps, collider, robot.hand, screen, on_table)
         return evaluate_slot(robot, slot, screened, arms, settings=screen, seeds=seeds, **kwargs)
 
-    _set_world(robot, world)
-    for arm in arms:
-        robot.attach(arm, None)
     start_slot = PoseSlot("start", "start", np.asarray(T_start, float))
-    start = evaluate(start_slot)
-    end = evaluate(goal.slot, goal.on_table, prefer={vid // 2 for vid, _ in start.solutions})
-    layers: list[GraspFeasibility] = [start, end]
-    stats: dict[str, Any] = {"feasible": {"start": len(start.solutions), "goal": len(end.solutions)}}
-    G = build_regrasp_graph(layers, regrasp_penalty=settings.regrasp_penalty, motion_weight=settings.motion_weight)
+
+    def start_and_goal() -> list[GraspFeasibility]:
+        _set_world(robot, world)
+        for arm in arms:
+            robot.attach(arm, None)
+        start = evaluate(start_slot)
+        return [start, evaluate(goal.slot, goal.on_table, prefer=_grasp_ids([start]))]
+
+    def graph(layers: list[GraspFeasibility]) -> nx.Graph:
+        return build_regrasp_graph(layers, regrasp_penalty=settings.regrasp_penalty,
+                                   motion_weight=settings.motion_weight)
+
+    layers = start_and_goal()
+    stats: dict[str, Any] = {"feasible": {"start": len(layers[0].solutions), "goal": len(layers[1].solutions)}}
+    G = graph(layers)
     middle_done = widened = False
     slots: list[PoseSlot] = []
 
@@ -301,11 +308,9 @@ def plan_transfer(
         if not search.success and not middle_done and settings.max_placements > 0:
             tg = time.perf_counter()
             slots = list(middle_slots(False))
-            layers += middle_layers(slots, {vid // 2 for f in layers for vid, _ in f.solutions})
+            layers += middle_layers(slots, _grasp_ids(layers))
             stats["feasible"]["middle"] = sum(len(f.solutions) for f in layers[2:])
-            G = build_regrasp_graph(
-                layers, regrasp_penalty=settings.regrasp_penalty, motion_weight=settings.motion_weight
-            )
+            G = graph(layers)
             middle_done = True
             stats["graph_seconds"] += time.perf_counter() - tg
             if progress:
@@ -319,17 +324,11 @@ def plan_transfer(
             widened = middle_done = True
             screen = replace(screen, max_candidates=max(settings.max_candidates_wide, screen.max_candidates))
             slots = list(middle_slots(True))
-            _set_world(robot, world)
-            for arm in arms:
-                robot.attach(arm, None)
-            start = evaluate(start_slot)
-            end = evaluate(goal.slot, goal.on_table, prefer={vid // 2 for vid, _ in start.solutions})
-            layers = [start, end, *middle_layers(slots, {vid // 2 for f in (start, end) for vid, _ in f.solutions})]
-            stats["feasible"] = {"start": len(start.solutions), "goal": len(end.solutions),
+            layers = start_and_goal()
+            layers += middle_layers(slots, _grasp_ids(layers))
+            stats["feasible"] = {"start": len(layers[0].solutions), "goal": len(layers[1].solutions),
                                  "middle": sum(len(f.solutions) for f in layers[2:]), "widened": True}
-            G = build_regrasp_graph(
-                layers, regrasp_penalty=settings.regrasp_penalty, motion_weight=settings.motion_weight
-            )
+            G = graph(layers)
             stats["graph_seconds"] += time.perf_counter() - tg
             if progress:
                 progress(f"{part.name}: no keyframe path; all {len(slots)} placement slots, "
@@ -369,6 +368,11 @@ def plan_transfer(
                      min_clearance_m=min_clear)
         return TransferResult(True, steps=steps, search=search, graph=G, stats=_rounded(stats), q_end=q_end,
                               keyframes=keyframes)
+
+
+def _grasp_ids(layers: Sequence[GraspFeasibility]) -> set[int]:
+    """Grasp ids (not variants) with a solution in any of ``layers``: tried first at the next slots."""
+    return {vid // 2 for f in layers for vid, _ in f.solutions}
 
 
 def _set_world(robot: Robot, world: Sequence[Obstacle], *extra: Obstacle) -> None:

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from asmteach.core.errors import UserError
-from asmteach.core.geometry import compose, from_rotation, rot_z
+from asmteach.core.geometry import compose, from_rotation, rot_z, transform_points
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import AssemblyTask, Placement
 
@@ -115,11 +115,10 @@ def clear_retraction(
     then has to thread a 0.5 mm clearance.
     """
     back = -np.asarray(v_world, float)
-    a = part_a.mesh.vertices @ T_world_a[:3, :3].T @ back + T_world_a[:3, 3] @ back
-    b = part_b.mesh.vertices @ T_world_b[:3, :3].T @ back + T_world_b[:3, 3] @ back
+    a = transform_points(T_world_a, part_a.mesh.vertices) @ back
+    b = transform_points(T_world_b, part_b.mesh.vertices) @ back
     return float(a.max() - b.min()) + CLEAR_MARGIN
 
 
 def _lowest(part: PartModel, T_world_part: np.ndarray) -> float:
-    v = part.mesh.vertices @ T_world_part[:3, :3].T + T_world_part[:3, 3]
-    return float(v[:, 2].min())
+    return float(transform_points(T_world_part, part.mesh.vertices)[:, 2].min())
