@@ -109,6 +109,11 @@ class CvfhSettings(StrictModel):
         8, ge=0, description="most likely stable rests tried when no CVFH hypothesis verifies (0: never)"
     )
     resting_yaws: int = Field(24, ge=1, description="yaws per stable rest, evenly spaced")
+    resting_rounds: int = Field(
+        8, ge=1,
+        description="rounds of icp_candidates resting hypotheses tried until one verifies: they are many (rests x "
+        "yaws) and a part seen end-on ranks the right yaw low, since every yaw explains the face it shows",
+    )
     twin_fit: float = Field(0.004, gt=0.0, description="a pose explains a point within this along its ray, metres")
     twin_off: float = Field(0.010, gt=0.0, description="a pose clearly fails a point beyond this along its ray")
     twin_min_points: int = Field(10, ge=1, description="points of evidence needed to tell hull twins apart")
@@ -336,7 +341,7 @@ class CvfhIcpDetector(Detector):
                 cluster, prep.model, prep.rests, table, eye, s.resting_yaws)]
             scored = sorted(rest, key=lambda h: -prescore(h))
             clock.lap("matching")
-            best, closest2, info2 = self._rounds(scored, job, prep, clock)
+            best, closest2, info2 = self._rounds(scored, job, prep, clock, s.resting_rounds)
             if closest2 is not None and (closest is None or closest2.score > closest.score):
                 closest = closest2
             if best is not None:
@@ -348,16 +353,21 @@ class CvfhIcpDetector(Detector):
         return _Outcome(best, closest, {**info, "hypotheses": len(hyps), "cluster_points": len(cluster)})
 
     def _rounds(
-        self, scored: list[tuple[int, np.ndarray, float]], job: _Cluster, prep: _Prepared, clock: StageClock
+        self, scored: list[tuple[int, np.ndarray, float]], job: _Cluster, prep: _Prepared, clock: StageClock,
+        max_rounds: int | None = None,
     ) -> tuple[Verdict | None, Verdict | None, dict]:
-        """Refine and verify pre-scored hypotheses in rounds until one verifies: ``(best, closest miss, info)``."""
+        """Refine and verify pre-scored hypotheses in rounds until one verifies: ``(best, closest miss, info)``.
+
+        At most ``max_rounds`` rounds (default: the ``max_rounds`` setting).
+        """
         s = self.settings
+        max_rounds = s.max_rounds if max_rounds is None else max_rounds
         best: Verdict | None = None
         closest: Verdict | None = None
         info: dict = {}
         rounds = 0
         # Rounds of icp_candidates hypotheses, best pre-scored first; later rounds only when nothing verified.
-        for first in range(0, min(len(scored), s.max_rounds * s.icp_candidates), s.icp_candidates):
+        for first in range(0, min(len(scored), max_rounds * s.icp_candidates), s.icp_candidates):
             rounds += 1
             # Coarse ICP on a subsample for every candidate, fine ICP and verification for the best few.
             coarse = []

@@ -116,3 +116,36 @@ def test_a_hole_in_view_decides_between_the_twins_and_a_hidden_one_is_reported_a
     assert alternatives, "the twin with the hole on the other side explains the view as well"
     poses = [det.rough] + [np.asarray(a["T_world_part"]) for a in alternatives]
     assert min(geometry.translation_distance(T, hidden) for T in poses) < 0.003
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("rounds", "found"), [(8, True), (3, False)])
+def test_a_peg_seen_end_on_in_the_simulated_cell_needs_the_resting_rounds(
+    peg_in_hole: tuple[PartModel, PartModel], tmp_path: Path, rounds: int, found: bool
+) -> None:
+    """End-to-end seed 66: the peg lies with its head towards the camera, the block upside down beside it.
+
+    Every yaw of the lying peg explains the square face it shows, so the right
+    one ranks about 50th of the resting hypotheses: three rounds of ten missed it.
+    """
+    from asmteach.core import registry
+    from asmteach.core.models import TablePlane
+
+    block, peg = peg_in_hole
+    T_block = geometry.from_rpy(np.pi, 0.0, np.radians(66.8948), t=[0.38963, 0.23076, 0.04])
+    T_peg = geometry.from_rpy(-np.pi / 2, 0.0, np.radians(-97.2211), t=[0.30498, -0.14075, 0.02])
+    robot = registry.create("robots", "nextage_pybullet", {}, seed=66)
+    try:
+        robot.reset_world(TablePlane(), {block.name: (block, T_block), peg.name: (peg, T_peg)})
+        T_true = robot.part_pose(peg.name)
+        _, cloud = robot.sense_depth()
+        eye = robot.camera_pose()[:3, 3]
+    finally:
+        robot.close()
+    detector = CvfhIcpDetector({"resting_rounds": rounds, "views": {"cache_dir": str(tmp_path)}}, seed=66)
+    det = detector.detect(cloud, peg, TablePlane(), viewpoint=eye)
+    assert det.found == found, det.reason
+    if found:
+        assert det.details["source"] == "resting"
+        assert geometry.translation_distance(det.rough, T_true) < 0.002
+        assert np.degrees(np.arccos(np.clip(det.rough[:3, 2] @ T_true[:3, 2], -1.0, 1.0))) < 2.0
