@@ -454,6 +454,24 @@ class AssemblyPlanner(Plugin):
     ) -> AssemblyResult:
         """Plan with ``robot``'s kinematics and collision model; never moves its simulator."""
 
+    def plan_insertion(
+        self,
+        problem: AssemblyProblem,
+        robot: Robot,
+        motion_planner: MotionPlanner,
+        *,
+        T_world_a: np.ndarray,
+        progress: Callable[[str], None] | None = None,
+    ) -> AssemblyResult:
+        """Optional: B's part of the plan only, into A already standing at ``T_world_a`` (world, metres).
+
+        The run calls it when A, seen again at its goal, is not quite where the
+        plan put it, to aim B at the A that is there. The arms start where they
+        are now. Planners that cannot do this raise :class:`NotImplementedError`
+        and the run goes on with the plan it has.
+        """
+        raise NotImplementedError
+
     def write_figures(self, result: AssemblyResult, out_dir: Path) -> dict[str, Path]:
         """Optional figures of a result (e.g. the regrasp graph); name -> PNG written atomically."""
         return {}

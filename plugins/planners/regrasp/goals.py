@@ -32,7 +32,14 @@ from asmteach.core.geometry import compose, from_rotation, rot_z, transform_poin
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import AssemblyTask, Placement
 
-__all__ = ["CLEAR_MARGIN", "VERTICAL_SNAP", "AssemblyGoal", "choose_assembly_goal", "clear_retraction"]
+__all__ = [
+    "CLEAR_MARGIN",
+    "VERTICAL_SNAP",
+    "AssemblyGoal",
+    "assembly_goal_at",
+    "choose_assembly_goal",
+    "clear_retraction",
+]
 
 VERTICAL_SNAP = float(np.radians(2.0))
 """Radians: a taught insertion direction this close to straight down at A's goal placement is made straight
@@ -72,24 +79,16 @@ def choose_assembly_goal(
     Raises :class:`UserError` when no placement of A keeps the assembled B and
     its pre-assembly pose above the table.
     """
-    v_a = np.asarray(task.v_a, float)
-    v_a = v_a / np.linalg.norm(v_a)
     best: tuple[float, AssemblyGoal] | None = None
     T_xy = compose(from_rotation(np.eye(3), [xy[0], xy[1], table_height]), rot_z(yaw))
     for p in placements_a:
-        T_a = T_xy @ p.T_table_part
-        T_b = T_a @ task.T_A_B
-        v_w = T_a[:3, :3] @ v_a
-        if float(np.arccos(np.clip(-v_w[2], -1.0, 1.0))) <= vertical_snap:
-            v_w = np.array([0.0, 0.0, -1.0])  # teaching noise, not a slanted insertion (module docstring)
-        T_pre = T_b.copy()
-        T_pre[:3, 3] -= max(retract, clear_retraction(part_a, part_b, T_a, T_b, v_w)) * v_w
-        low_b = min(_lowest(part_b, T_b), _lowest(part_b, T_pre))
+        goal = assembly_goal_at(part_a, part_b, task, T_xy @ p.T_table_part, p.id, retract=retract,
+                                vertical_snap=vertical_snap)
+        low_b = min(_lowest(part_b, goal.T_world_b), _lowest(part_b, goal.T_world_b_pre))
         if low_b < table_height - 1e-4:
             continue
         # prefer insertion straight down, then the likelier placement
-        key = float(-v_w[2]) + 0.05 * p.probability
-        goal = AssemblyGoal(T_a, T_b, T_pre, v_w, p.id)
+        key = float(-goal.v_world[2]) + 0.05 * p.probability
         if best is None or key > best[0]:
             best = (key, goal)
     if best is None:
@@ -98,6 +97,32 @@ def choose_assembly_goal(
             "check T_A_B and v_a of the structure"
         )
     return best[1]
+
+
+def assembly_goal_at(
+    part_a: PartModel,
+    part_b: PartModel,
+    task: AssemblyTask,
+    T_world_a: np.ndarray,
+    placement_id: int,
+    *,
+    retract: float,
+    vertical_snap: float = VERTICAL_SNAP,
+) -> AssemblyGoal:
+    """The goal with A at ``T_world_a`` (metres): B at ``T_world_a @ T_A_B``, its pre-assembly pose behind it.
+
+    The insertion direction is snapped to straight down as :func:`choose_assembly_goal` does;
+    also used for an A already standing somewhere (seen at its goal), to aim B at it.
+    """
+    v_a = np.asarray(task.v_a, float)
+    T_a = np.asarray(T_world_a, float)
+    v_w = T_a[:3, :3] @ (v_a / np.linalg.norm(v_a))
+    if float(np.arccos(np.clip(-v_w[2], -1.0, 1.0))) <= vertical_snap:
+        v_w = np.array([0.0, 0.0, -1.0])  # teaching noise, not a slanted insertion (module docstring)
+    T_b = T_a @ task.T_A_B
+    T_pre = T_b.copy()
+    T_pre[:3, 3] -= max(retract, clear_retraction(part_a, part_b, T_a, T_b, v_w)) * v_w
+    return AssemblyGoal(T_a, T_b, T_pre, v_w, placement_id)
 
 
 CLEAR_MARGIN = 0.005

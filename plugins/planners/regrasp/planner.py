@@ -34,7 +34,7 @@ from asmteach.plugins.planners.regrasp.assembly import (
     placement_slots,
     plan_transfer,
 )
-from asmteach.plugins.planners.regrasp.goals import choose_assembly_goal
+from asmteach.plugins.planners.regrasp.goals import AssemblyGoal, assembly_goal_at, choose_assembly_goal
 from asmteach.plugins.planners.regrasp.graph import PoseSlot
 from asmteach.plugins.planners.regrasp.plan_io import render_regrasp_graph, table_obstacle, to_plan
 
@@ -91,38 +91,75 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         details["a"] = res_a
         if not res_a.success:
             return self._fail(result, res_a, f"part A ({a.name})", t0, robot)
-        # Part B: A stands at its goal; B may touch A (and the table) on the insertion only.
-        world_b = [table, Obstacle(a.name, a.mesh, goal.T_world_a)]
+        res_b = self._plan_b(problem, goal, robot, motion_planner, res_a.q_end, progress)
+        details["b"] = res_b
+        if not res_b.success:
+            result.plan = self._timed(robot, [("A", a.name, res_a)], t0)
+            return self._fail(result, res_b, f"part B ({b.name})", t0, robot, keep_plan=True)
+        result.plan = self._timed(robot, [("A", a.name, res_a), ("B", b.name, res_b)], t0)
+        result.success = True
+        return result
+
+    def plan_insertion(
+        self,
+        problem: AssemblyProblem,
+        robot: Robot,
+        motion_planner: MotionPlanner,
+        *,
+        T_world_a: np.ndarray,
+        progress: Callable[[str], None] | None = None,
+    ) -> AssemblyResult:
+        """B's segments only, into A standing at ``T_world_a`` (seen there); the arms start where they are now."""
+        s = self.settings
+        t0 = time.perf_counter()
+        q_now = {arm: robot.current(arm) for arm in robot.arms}
+        goal = assembly_goal_at(problem.part_a, problem.part_b, problem.task, T_world_a, -1, retract=s.retract,
+                                vertical_snap=float(np.radians(s.vertical_snap_deg)))
+        result = AssemblyResult(False, Plan(), T_world_a_goal=goal.T_world_a, T_world_b_goal=goal.T_world_b,
+                                details={"v_world": goal.v_world.tolist()})
+        try:
+            res_b = self._plan_b(problem, goal, robot, motion_planner, q_now, progress)
+        finally:
+            for arm, q in q_now.items():
+                robot.set_configuration(arm, q)
+        result.details["b"] = res_b
+        if not res_b.success:
+            return self._fail(result, res_b, f"part B ({problem.part_b.name})", t0, robot)
+        result.plan = self._timed(robot, [("B", problem.part_b.name, res_b)], t0)
+        result.success = True
+        return result
+
+    def _plan_b(self, problem: AssemblyProblem, goal: AssemblyGoal, robot: Robot, motion_planner: MotionPlanner,
+                q_now: dict[str, np.ndarray], progress: Callable[[str], None] | None) -> TransferResult:
+        """B from where it lies to the assembled pose; A stands at its goal, B may touch it (and the table) only on
+        the insertion."""
+        s, a, b, h = self.settings, problem.part_a, problem.part_b, problem.table.height
+        world_b = [table_obstacle(robot, h), Obstacle(a.name, a.mesh, goal.T_world_a)]
         start_b = problem.T_world_b[:3, 3]
         back = goal.T_world_b_pre[:3, 3] - goal.T_world_b[:3, 3]  # the retraction, along -v_world
-        res_b = plan_transfer(
+        return plan_transfer(
             robot, motion_planner, b, problem.grasps_b,
             T_start=problem.T_world_b,
             goal=PlaceGoal(PoseSlot("assembled", "goal", goal.T_world_b), back, touch=(a.name, "table"),
                            on_table=False),
             middle_slots=lambda every: placement_slots(compute_placements(b), start_b[:2], h, s, every=every,
                                                        first=(problem.T_world_b[:3, :3], goal.T_world_b[:3, :3])),
-            world=world_b, q_now=res_a.q_end, settings=s, progress=progress,
+            world=world_b, q_now=q_now, settings=s, progress=progress,
         )
-        details["b"] = res_b
-        if not res_b.success:
-            result.plan = self._timed(robot, res_a, None, t0, (a.name, b.name))
-            return self._fail(result, res_b, f"part B ({b.name})", t0, robot, keep_plan=True)
-        result.plan = self._timed(robot, res_a, res_b, t0, (a.name, b.name))
-        result.success = True
-        return result
 
-    def _timed(self, robot: Robot, res_a: TransferResult, res_b: TransferResult | None, t0: float,
-               names: tuple[str, str]) -> Plan:
-        steps = list(res_a.steps) + (list(res_b.steps) if res_b is not None else [])
-        keyframes = [dict(k, part="A") for k in res_a.keyframes]
-        if res_b is not None:
-            keyframes += [dict(k, part="B") for k in res_b.keyframes]
-        stats = {"A": res_a.stats, "B": res_b.stats if res_b is not None else None,
-                 "planning_seconds": round(time.perf_counter() - t0, 3)}
+    def _timed(self, robot: Robot, parts: list[tuple[str, str, TransferResult]], t0: float) -> Plan:
+        """One timed plan of the parts' steps in order; ``parts``: (role "A"/"B", part name, its transfer)."""
+        steps, keyframes, owner = [], [], []
+        stats: dict = {"A": None, "B": None}
+        for key, name, res in parts:
+            steps += res.steps
+            owner += [name] * len(res.steps)
+            keyframes += [dict(k, part=key) for k in res.keyframes]
+            stats[key] = res.stats
+        stats["planning_seconds"] = round(time.perf_counter() - t0, 3)
         plan = to_plan(steps, robot, self.settings.acceleration, keyframes=keyframes, stats=stats)
-        for k, seg in enumerate(plan.segments):  # one segment per step: A's steps first, then B's
-            seg.part = names[0] if k < len(res_a.steps) else names[1]
+        for seg, name in zip(plan.segments, owner, strict=True):  # one segment per step
+            seg.part = name
         return plan
 
     def _fail(self, result: AssemblyResult, res: TransferResult, who: str, t0: float, robot: Robot,

@@ -147,3 +147,39 @@ def test_peg_in_hole_plan_is_collision_free_and_ends_assembled(peg_in_hole_plan)
     for seg in home_moves:
         dense = densify(np.asarray(seg.trajectory.positions), 0.01)
         assert not robot.in_collision(seg.trajectory.arm, dense).any()
+
+
+@pytest.mark.slow
+def test_plan_insertion_aims_b_at_an_a_seen_off_its_goal(peg_in_hole_plan) -> None:
+    """A seen 1 mm and 1 deg off its planned goal: B's segments alone, from where the arms are, into that A."""
+    from asmteach.core import registry
+    from asmteach.core.interfaces import AssemblyProblem
+    from asmteach.core.models import TablePlane
+
+    p = peg_in_hole_plan
+    robot, task = p.robot, p.task
+    T_seen = geometry.compose(geometry.from_rpy(0, 0, 0, t=[0.001, 0.0, 0.0]), p.result.T_world_a_goal,
+                              geometry.rot_z(np.radians(1.0)))
+    grasps = registry.create("grasp_planners", "antipodal", {}, seed=0)
+    problem = AssemblyProblem(p.a, p.b, task, T_seen, p.T_b, grasps.plan(p.a, robot.hand),
+                              grasps.plan(p.b, robot.hand), TablePlane(height=0.0))
+    planner = registry.create("assembly_planners", "regrasp", {}, seed=0)
+    motion = registry.create("motion_planners", "rrtconnect", {}, seed=0)
+    q_now = {arm: robot.current(arm) for arm in robot.arms}
+    res = planner.plan_insertion(problem, robot, motion, T_world_a=T_seen)
+    assert res.success, res.reason
+    assert {seg.part for seg in res.plan.segments} == {p.b.name}
+    first = next(s for s in res.plan.segments if s.trajectory is not None).trajectory
+    np.testing.assert_allclose(first.positions[0], q_now[first.arm], atol=1e-6)
+    np.testing.assert_allclose(res.T_world_b_goal, T_seen @ task.T_A_B, atol=1e-12)
+    # B is held as it was picked (no regrasp: it stands on its shank) and ends at the assembled pose in the A seen
+    segs = res.plan.segments
+    k_close = next(k for k, s in enumerate(segs) if s.gripper is not None and s.gripper.action == "close")
+    approach = next(s for s in reversed(segs[:k_close]) if s.trajectory is not None).trajectory
+    T_b_tcp = np.linalg.inv(p.T_b) @ robot.fk(approach.arm, np.asarray(approach.positions)[-1])
+    insert = next(s for s in segs if s.label.startswith("insert")).trajectory
+    T_b_end = robot.fk(insert.arm, np.asarray(insert.positions)[-1]) @ np.linalg.inv(T_b_tcp)
+    err = geometry.invert(res.T_world_b_goal) @ T_b_end
+    assert np.linalg.norm(err[:3, 3]) < 2e-4
+    for arm, q in q_now.items():  # planning leaves the arms where they were
+        np.testing.assert_allclose(robot.current(arm), q, atol=1e-9)
