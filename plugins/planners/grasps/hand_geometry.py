@@ -127,3 +127,13 @@ class MeshCollider:
     def collides(self, boxes: Sequence[HandBox], T_frame_tcp: np.ndarray) -> bool:
         """True when any hand box touches any object."""
         return self.first_contact(boxes, T_frame_tcp) is not None
+
+    def distance(self, mesh: trimesh.Trimesh, T_frame_mesh: np.ndarray, skip: Sequence[str] = ()) -> float:
+        """Least distance (metres) from ``mesh`` at ``T_frame_mesh`` to the objects not named in ``skip``;
+        0 when they touch, ``inf`` when there is no other object."""
+        obj = fcl.CollisionObject(_fcl_mesh(mesh), _fcl_transform(T_frame_mesh))
+        best = np.inf
+        for name, other in self.objects.items():
+            if name not in skip:
+                best = min(best, max(0.0, fcl.distance(obj, other, fcl.DistanceRequest(), fcl.DistanceResult())))
+        return float(best)
