@@ -12,6 +12,13 @@ a grasp, the cheapest path never regrasps (each regrasp costs
 ``regrasp_penalty``, more than any difference in transfer motion), so the
 intermediate placements are evaluated only when that search fails.
 
+The placements are first tried where the part starts. Near the edge of the
+robot's reach a part can often be put down there but not picked up again in
+the new way (a lying peg stood upright for its vertical insertion), so when
+even the widened search fails, the same placements are tried again further
+toward the goal, one position at a time (``relocations``), clear of the
+other obstacles; the part is then carried there, regrasped, and carried on.
+
 Frames: ``T_world_*`` 4x4 in metres; joint paths in radians.
 """
 
@@ -30,6 +37,7 @@ from pydantic import Field
 from asmteach.core.geometry import compose, from_rotation, rot_z
 from asmteach.core.interfaces import MotionPlanner, Obstacle, PartModel, Robot
 from asmteach.core.models import Grasp, GripperEvent, Placement, StrictModel
+from asmteach.plugins.planners.grasps.hand_geometry import MeshCollider
 from asmteach.plugins.planners.motion.batch import batched
 from asmteach.plugins.planners.motion.interpolate import densify
 from asmteach.plugins.planners.motion.query import FailureKind
@@ -61,6 +69,7 @@ __all__ = [
     "cartesian_path",
     "placement_slots",
     "plan_transfer",
+    "relocated_slots",
 ]
 
 
@@ -81,6 +90,15 @@ class AssemblySettings(StrictModel):
         80, ge=1, le=1000,
         description="when no keyframe path exists, the search is tried once more with every placement (symmetric "
         "duplicates too) and this many grasps solved per slot")
+    relocations: tuple[float, ...] = Field(
+        (0.5, 0.25, 0.75),
+        description="when even the widened search finds no keyframe path, every placement is tried again at "
+        "these fractions (dimensionless; 0 = start, 1 = goal) of the way from the part's start to its goal on "
+        "the table, one position at a time in this order, until a path exists (empty: never)")
+    relocation_clearance: float = Field(
+        0.03, ge=0.0, le=0.3,
+        description="metres: a relocated placement keeps at least this distance between the part and every "
+        "obstacle other than the table (room for the fingers); positions closer are skipped")
     min_down: float = Field(0.3, ge=-1.0, le=1.0, description="cosine: approach to a part on the table from above")
     pregrasp_distance: float = Field(0.06, gt=0.0, description="approach stand-off along the TCP -z")
     lift: float = Field(0.08, gt=0.0, description="lift above the table after grasping / before placing")
@@ -188,6 +206,30 @@ def placement_slots(
     return slots
 
 
+def relocated_slots(
+    slots: Sequence[PoseSlot],
+    from_xy: Sequence[float],
+    to_xy: Sequence[float],
+    part: PartModel,
+    collider: MeshCollider,
+    clearance: float,
+) -> list[PoseSlot]:
+    """``slots``, placements made at table position ``from_xy``, moved to ``to_xy`` (world x, y, metres);
+    none when the part would come within ``clearance`` metres of any obstacle of ``collider`` but the table
+    in any of them. A slot's name gains ``_at{x}_{y}``, ``to_xy`` in millimetres.
+    """
+    shift = np.asarray(to_xy, float)[:2] - np.asarray(from_xy, float)[:2]
+    x, y = (round(float(v) * 1000.0) for v in to_xy[:2])
+    out = []
+    for slot in slots:
+        T = np.asarray(slot.T_world_part, float).copy()
+        T[:2, 3] += shift
+        if collider.distance(part.mesh, T, skip=("table",)) < clearance:
+            return []
+        out.append(PoseSlot(f"{slot.name}_at{x}_{y}", slot.layer, T))
+    return out
+
+
 def _placement_resting_as(placements: Sequence[Placement], R_world_part: np.ndarray) -> Placement | None:
     """The placement whose resting direction (part frame) is the table's down in ``R_world_part``, within 3 deg."""
     down = np.asarray(R_world_part, float).T @ np.array([0.0, 0.0, -1.0])
@@ -245,9 +287,12 @@ def plan_transfer(
     """Move ``part`` from ``T_start`` to ``goal``; the arms end at home.
 
     ``world`` holds the table (named ``"table"``) and the other obstacles,
-    not this part. ``middle_slots(every)`` is called only if intermediate
-    placements are needed: first the chosen few, then, if the search
-    still fails, every placement (``every=True``). Paths are untimed; see
+    not this part. ``middle_slots(every)`` gives placements at the part's
+    start position and is called only if intermediate placements are
+    needed: first the chosen few, then, if the search still fails, every
+    placement (``every=True``), which is then moved toward the goal
+    (``settings.relocations``) while no path exists.
+    Paths are untimed; see
     :func:`asmteach.plugins.planners.regrasp.plan_io.to_plan`.
     """
     t0 = time.perf_counter()
@@ -283,6 +328,9 @@ def plan_transfer(
     G = graph(layers)
     middle_done = widened = False
     slots: list[PoseSlot] = []
+    relocations = list(settings.relocations)
+    start_xy = np.asarray(T_start, float)[:2, 3]
+    goal_xy = np.asarray(goal.slot.T_world_part, float)[:2, 3]
 
     def middle_layers(slots: list[PoseSlot], prefer: set[int]) -> list[GraspFeasibility]:
         screens = [screen_slot(slot, grasps, collider, robot.hand, screen) for slot in slots]
@@ -333,6 +381,24 @@ def plan_transfer(
             if progress:
                 progress(f"{part.name}: no keyframe path; all {len(slots)} placement slots, "
                          f"{screen.max_candidates} grasps solved per slot")
+            continue
+        if not search.success and widened and relocations and settings.max_placements > 0:
+            # Where the part starts, the arm may reach it in one way and not in the other (at the edge of
+            # its reach): the same placements, further toward the goal and clear of the other obstacles.
+            tg = time.perf_counter()
+            fraction = relocations.pop(0)
+            moved = relocated_slots(slots, start_xy, start_xy + fraction * (goal_xy - start_xy), part, collider,
+                                    settings.relocation_clearance)
+            stats.setdefault("relocations", []).append(fraction)
+            if moved:
+                layers += middle_layers(moved, _grasp_ids(layers))
+                stats["feasible"]["middle"] = sum(len(f.solutions) for f in layers[2:])
+                G = graph(layers)
+            stats["graph_seconds"] += time.perf_counter() - tg
+            if progress:
+                where = f"{fraction:g} of the way to the goal"
+                progress(f"{part.name}: no keyframe path; {len(moved)} placement slots added {where}" if moved
+                         else f"{part.name}: placements {where} would come too near an obstacle; skipped")
             continue
         stats["graph_nodes"] = G.number_of_nodes() - 2
         stats["graph_edges"] = G.number_of_edges()

@@ -1,0 +1,185 @@
+"""Placements moved toward the goal when none at the part's start connects start and goal (plan_transfer).
+
+The fixture is made in code: a 20 x 20 x 80 mm square peg lying at y = 0.30 m
+that must stand upright at (0.40, 0) m, three hand-made grasps, and a point
+robot double whose IK reaches the table's edge (|y| > 0.2 m) only from
+straight above. There the peg's grasp across its side (from above while it
+lies) and its grasp on the top end (from above while it stands) are the only
+ones that work, and no grasp works both lying and standing; nearer the middle
+a diagonal grasp works both ways, so the peg must be put down there and
+regrasped.
+"""
+
+from collections.abc import Sequence
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from asmteach.core import geometry
+from asmteach.core.interfaces import IKResult, MotionResult, Obstacle, PartModel, Robot
+from asmteach.core.models import Grasp, HandSpec, PartSpec, Primitive, SolidSpec
+from asmteach.core.parts import build_part
+from asmteach.plugins.planners.grasps.hand_geometry import MeshCollider
+from asmteach.plugins.planners.placements.planner import compute_placements
+from asmteach.plugins.planners.regrasp.assembly import (
+    AssemblySettings,
+    PlaceGoal,
+    placement_slots,
+    plan_transfer,
+    relocated_slots,
+)
+from asmteach.plugins.planners.regrasp.graph import PoseSlot
+
+HAND = HandSpec(name="test_2f", max_width=0.085, finger_size=[0.010, 0.020, 0.045], pad_size=(0.020, 0.030),
+                palm_center=[0.0, 0.0, -0.050], palm_size=[0.040, 0.100, 0.040])
+START_XY = np.array([0.30, 0.30])
+GOAL_XY = np.array([0.40, 0.0])
+
+
+class EdgeOfReachArm(Robot):
+    """One arm; configuration = TCP position and rotation vector. IK needs the approach (TCP +z) at least
+    0.3 down (cosine), and at least 0.95 down where |y| > 0.2 m; nothing collides."""
+
+    def __init__(self) -> None:
+        super().__init__({})
+
+    arms = property(lambda self: ["left"])
+    hand = property(lambda self: HAND)
+
+    def joint_names(self, arm: str) -> list[str]:
+        return ["x", "y", "z", "rx", "ry", "rz"]
+
+    def joint_limits(self, arm: str) -> tuple[np.ndarray, np.ndarray]:
+        return np.full(6, -10.0), np.full(6, 10.0)
+
+    def home(self, arm: str) -> np.ndarray:
+        return np.array([0.3, 0.0, 0.3, np.pi, 0.0, 0.0])  # TCP 0.3 m up, pointing down
+
+    def fk(self, arm: str, q: np.ndarray) -> np.ndarray:
+        return geometry.from_rotvec(q[3:], q[:3])
+
+    def ik(self, arm: str, T_world_tcp: np.ndarray, q_seed: np.ndarray | None = None) -> IKResult:
+        down = -T_world_tcp[2, 2]
+        if down < 0.3 or (abs(T_world_tcp[1, 3]) > 0.2 and down < 0.95):
+            return IKResult(False, None, reason="wrist limit")
+        q = np.concatenate([T_world_tcp[:3, 3], Rotation.from_matrix(T_world_tcp[:3, :3]).as_rotvec()])
+        return IKResult(True, q, 0.0, 0.0)
+
+    def set_obstacles(self, obstacles: Sequence[Obstacle]) -> None:
+        pass
+
+    def attach(self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None, *,
+               width: float | None = None) -> None:
+        pass
+
+    def set_configuration(self, arm: str, q: np.ndarray) -> None:
+        pass
+
+    def in_collision(self, arm: str, qs: np.ndarray, *, ignore: Sequence[str] = ()) -> np.ndarray:
+        return np.zeros(len(np.atleast_2d(qs)), bool)
+
+    def clearance(self, arm: str, qs: np.ndarray, upto: float = np.inf) -> np.ndarray:
+        return np.full(len(np.atleast_2d(qs)), min(1.0, upto))
+
+    def collision_report(self, arm: str, q: np.ndarray) -> list[tuple[str, str]]:
+        return []
+
+
+class StraightLine:
+    """Motion planner double: the straight joint-space line."""
+
+    def plan(self, start: np.ndarray, goal: np.ndarray, **_: object) -> MotionResult:
+        return MotionResult(True, np.stack([start, goal]))
+
+
+def grasp(gid: int, approach: Sequence[float], z: float) -> Grasp:
+    """Across the peg's y (20 mm) at height ``z`` of its axis, the TCP approaching along ``approach`` (part)."""
+    zt = np.asarray(approach, float) / np.linalg.norm(approach)
+    yt = np.array([0.0, 1.0, 0.0])
+    return Grasp(id=gid, p0=[0.0, -0.01, z], p1=[0.0, 0.01, z], R=np.column_stack([np.cross(yt, zt), yt, zt]),
+                 width=0.02)
+
+
+@pytest.fixture(scope="module")
+def peg() -> PartModel:
+    box = Primitive(shape="box", size=[0.02, 0.02, 0.08], pose={"xyz": [0, 0, 0.04]})
+    return build_part(PartSpec(name="peg", solid=SolidSpec(add=[box])))
+
+
+GRASPS = [grasp(0, [1, 0, 0], 0.04),  # across the side: from above while the peg lies on its -x face
+          grasp(1, [0, 0, -1], 0.07),  # on the top end: from above while the peg stands
+          grasp(2, [1, 0, -1], 0.06)]  # diagonal: 45 deg from vertical lying and standing
+
+
+LYING = Rotation.from_euler("y", 90, degrees=True).as_matrix()  # on its -x face, the axis along world +x
+
+
+def transfer(peg: PartModel, settings: AssemblySettings, world: Sequence[Obstacle] = (),
+             T_goal: np.ndarray | None = None):
+    T_start = geometry.from_rotation(LYING, [*START_XY, 0.01])
+    T_goal = geometry.from_rotation(np.eye(3), [*GOAL_XY, 0.0]) if T_goal is None else T_goal
+    calls: list[bool] = []
+
+    def middle(every: bool) -> list[PoseSlot]:
+        calls.append(every)
+        return placement_slots(compute_placements(peg), T_start[:2, 3], 0.0, settings, every=every)
+
+    robot = EdgeOfReachArm()
+    res = plan_transfer(robot, StraightLine(), peg, GRASPS, T_start=T_start,
+                        goal=PlaceGoal(PoseSlot("goal", "goal", T_goal), np.array([0.0, 0.0, 0.05]), on_table=False),
+                        middle_slots=middle, world=list(world), q_now={"left": robot.home("left")},
+                        settings=settings)
+    return res, calls
+
+
+def test_a_peg_is_stood_up_further_toward_the_goal_when_no_placement_at_its_start_connects(peg) -> None:
+    res, calls = transfer(peg, AssemblySettings(placement_yaws=2))
+    assert res.success, res.reason
+    assert calls == [False, True]  # the chosen placements, every placement, then the same moved
+    assert res.stats["relocations"] == [0.5]
+    # picked across the side at the start, put down half way (0.35, 0.15), regrasped diagonally, stood up
+    names = [n[0] for n in res.search.nodes]
+    assert names[0] == "start" and names[-1] == "goal" and res.search.regrasps == 1
+    moved = [n for n in names if n.endswith("_at350_150")]
+    assert moved and all(n in moved for n in names[1:-1])
+    assert [n[1] // 2 for n in res.search.nodes] == [0, 0, 2, 2]
+
+
+def test_a_peg_that_needs_no_regrasp_is_carried_straight_there(peg) -> None:
+    """The cheap search comes first: no placement is evaluated, let alone moved."""
+    res, calls = transfer(peg, AssemblySettings(placement_yaws=2),
+                          T_goal=geometry.from_rotation(LYING, [*GOAL_XY, 0.01]))
+    assert res.success, res.reason
+    assert calls == [] and "relocations" not in res.stats
+    assert [n[0] for n in res.search.nodes] == ["start", "goal"]
+
+
+def test_without_relocations_the_peg_cannot_be_turned(peg) -> None:
+    res, calls = transfer(peg, AssemblySettings(placement_yaws=2, relocations=()))
+    assert not res.success and calls == [False, True]
+    assert "relocations" not in res.stats
+
+
+def test_a_position_too_near_an_obstacle_is_skipped_for_the_next(peg) -> None:
+    """A box on the half-way point: the placements go three quarters of the way instead (0.375, 0.075)."""
+    box = Obstacle("box", trimesh.creation.box(extents=[0.02, 0.02, 0.02]),
+                   geometry.from_rotation(np.eye(3), [0.35, 0.15, 0.01]))
+    settings = AssemblySettings(placement_yaws=2, relocations=(0.5, 0.75), relocation_clearance=0.01)
+    res, _ = transfer(peg, settings, world=[box])
+    assert res.success, res.reason
+    assert res.stats["relocations"] == [0.5, 0.75]
+    assert any(n[0].endswith("_at375_75") for n in res.search.nodes)
+
+
+def test_relocated_slots_move_every_slot_or_none(peg) -> None:
+    slots = placement_slots(compute_placements(peg), START_XY, 0.0, AssemblySettings(placement_yaws=2))
+    far = MeshCollider({"box": (trimesh.creation.box(extents=[0.04, 0.04, 0.04]),
+                                geometry.from_rotation(np.eye(3), [0.35, 0.40, 0.02]))})
+    moved = relocated_slots(slots, START_XY, (0.35, 0.15), peg, far, clearance=0.03)
+    assert [s.name for s in moved] == [f"{s.name}_at350_150" for s in slots]
+    for s, m in zip(slots, moved, strict=True):
+        np.testing.assert_allclose(m.T_world_part[:3, :3], s.T_world_part[:3, :3])
+        np.testing.assert_allclose(m.T_world_part[:3, 3] - s.T_world_part[:3, 3], [0.05, -0.15, 0.0], atol=1e-12)
+    assert relocated_slots(slots, START_XY, (0.30, 0.35), peg, far, clearance=0.03) == []  # within 3 cm of the box
