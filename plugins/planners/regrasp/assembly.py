@@ -28,7 +28,7 @@ import time
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import networkx as nx
 import numpy as np
@@ -90,7 +90,7 @@ class AssemblySettings(StrictModel):
         80, ge=1, le=1000,
         description="when no keyframe path exists, the search is tried once more with every placement (symmetric "
         "duplicates too) and this many grasps solved per slot")
-    relocations: tuple[float, ...] = Field(
+    relocations: tuple[Annotated[float, Field(gt=0.0, le=1.0)], ...] = Field(
         (0.5, 0.25, 0.75),
         description="when even the widened search finds no keyframe path, every placement is tried again at "
         "these fractions (dimensionless; 0 = start, 1 = goal) of the way from the part's start to its goal on "
