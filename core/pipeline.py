@@ -388,7 +388,10 @@ def _look_again(run: _Run, robot: Robot, task: AssemblyTask, parts: tuple[PartMo
         _, cloud, viewpoint = _sense(robot)
         det = detector.detect(cloud, a, table, viewpoint=viewpoint)
         if not det.found or det.rough is None:
-            raise StageFailed(f"{a.name} not found again at its goal: {det.reason}")
+            if detections[a.name].details.get("ambiguous"):
+                raise StageFailed(f"{a.name} not found again at its goal: {det.reason}")
+            d["not_found"] = det.reason  # nothing to decide: the plan goes on as it was
+            return result, rest
         T = det.rough
         if run.cfg.corrector is not None:
             corrector = run.plugin("corrector")
