@@ -44,6 +44,12 @@ class ExecutionSettings(StrictModel):
     success_position_mm: float = Field(2.0, gt=0.0, description="B in A: position tolerance")
     success_angle_deg: float = Field(2.0, gt=0.0, description="B in A: rotation tolerance")
     success_a_goal_mm: float = Field(3.0, gt=0.0, description="A at its goal: position tolerance")
+    depth_frames: int = Field(
+        4, ge=1, le=30,
+        description="depth frames stacked into the cloud each time the parts are looked at: the noise is new in "
+        "every frame, and four frames cut the peg's detection error from 0.3-0.7 mm to 0.1-0.4 mm (demo seeds 0, 1, "
+        "19, 49, 57, 63), against the hole's 0.5 mm clearance",
+    )
     recheck_plan: bool = Field(True, description="re-check the plan with the robot's independent collision check")
     look_again: Literal["never", "ambiguous", "always"] = Field(
         "always",
@@ -265,7 +271,7 @@ def _detect(run: _Run, robot: Robot, parts: tuple[PartModel, ...], table: TableP
     with run.stage("detect", total=len(parts)) as d:
         detector = run.plugin("detector")
         corrector = run.plugin("corrector") if run.cfg.corrector is not None else None
-        depth, cloud, viewpoint = _sense(robot)
+        depth, cloud, viewpoint = _sense(robot, run.execution.depth_frames)
         np.save(run.out / "depth.npy", depth.astype(np.float32))
         out: dict[str, Detection] = {}
         for part in parts:
@@ -300,9 +306,16 @@ def _detect(run: _Run, robot: Robot, parts: tuple[PartModel, ...], table: TableP
         return out
 
 
-def _sense(robot: Robot) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """``(depth image, cloud (n, 3) world frame, camera centre or None)`` from the robot's depth camera."""
+def _sense(robot: Robot, frames: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """``(depth image, cloud (n, 3) world frame, camera centre or None)`` from the robot's depth camera.
+
+    The clouds of ``frames`` depth frames are stacked (the parts stand still;
+    the sensor's noise is new in every frame, so the detector's voxel filter
+    and ICP average it out); the depth image is the first frame's.
+    """
     depth, cloud = robot.sense_depth()
+    if frames > 1:
+        cloud = np.concatenate([cloud] + [robot.sense_depth()[1] for _ in range(frames - 1)])
     try:
         viewpoint = robot.camera_pose()[:3, 3]
     except NotImplementedError:
@@ -386,7 +399,7 @@ def _look_again(run: _Run, robot: Robot, task: AssemblyTask, parts: tuple[PartMo
     ex = run.execution
     with run.stage("look_again") as d:
         detector = run.plugin("detector")
-        _, cloud, viewpoint = _sense(robot)
+        _, cloud, viewpoint = _sense(robot, run.execution.depth_frames)
         det = detector.detect(cloud, a, table, viewpoint=viewpoint)
         if not det.found or det.rough is None:
             if detections[a.name].details.get("ambiguous"):

@@ -144,3 +144,24 @@ def test_a_block_put_down_a_millimetre_off_is_seen_and_the_peg_aimed_at_it(tmp_p
     assert {seg["part"] for seg in plan_again["segments"]} == {"round_peg"}
     assert report["success"], report["reason"]
     assert report["metrics"]["achieved_vs_taught_mm"] < 0.5
+
+
+def test_a_look_stacks_the_clouds_of_several_depth_frames() -> None:
+    from asmteach.core.pipeline import ExecutionSettings, _sense
+
+    class Camera:
+        calls = 0
+
+        def sense_depth(self) -> tuple[np.ndarray, np.ndarray]:
+            self.calls += 1
+            return np.full((4, 4), float(self.calls)), np.full((10, 3), float(self.calls))
+
+        def camera_pose(self) -> np.ndarray:
+            return np.eye(4)
+
+    cam = Camera()
+    depth, cloud, eye = _sense(cam, ExecutionSettings().depth_frames)
+    assert cam.calls == 4 and cloud.shape == (40, 3)
+    assert sorted(set(cloud[:, 0])) == [1.0, 2.0, 3.0, 4.0]  # every frame's own points
+    assert np.all(depth == 1.0) and np.all(eye == 0.0)
+    assert _sense(Camera(), 1)[1].shape == (10, 3)
