@@ -399,7 +399,7 @@ def _look_again(run: _Run, robot: Robot, task: AssemblyTask, parts: tuple[PartMo
     ex = run.execution
     with run.stage("look_again") as d:
         detector = run.plugin("detector")
-        _, cloud, viewpoint = _sense(robot, run.execution.depth_frames)
+        _, cloud, viewpoint = _sense(robot, ex.depth_frames)
         det = detector.detect(cloud, a, table, viewpoint=viewpoint)
         if not det.found or det.rough is None:
             if detections[a.name].details.get("ambiguous"):
@@ -424,13 +424,13 @@ def _look_again(run: _Run, robot: Robot, task: AssemblyTask, parts: tuple[PartMo
         problem = AssemblyProblem(a, b, task, T, detections[b.name].best, grasps[a.name], grasps[b.name], table)
         d["replanned"] = d["reaimed"] = False
         if err["position_mm"] <= ex.success_a_goal_mm and err["angle_deg"] <= ex.success_angle_deg:
-            T = T_near
-            b_off = pose_error(T @ task.T_A_B, result.T_world_a_goal @ task.T_A_B)
+            b_off = pose_error(T_near @ task.T_A_B, result.T_world_a_goal @ task.T_A_B)
             d["b_goal_shift"] = {k: round(v, 3) for k, v in b_off.items()}
             if b_off["position_mm"] <= ex.reaim_mm and b_off["angle_deg"] <= ex.reaim_deg:
                 return result, rest
             try:
-                new = planner.plan_insertion(problem, robot, motion, T_world_a=T, progress=run.progress("look_again"))
+                new = planner.plan_insertion(problem, robot, motion, T_world_a=T_near,
+                                             progress=run.progress("look_again"))
             except NotImplementedError:
                 d["reaim"] = "the assembly planner cannot plan B alone; the plan goes on"
                 return result, rest

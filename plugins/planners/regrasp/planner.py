@@ -12,7 +12,8 @@ goal.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -55,12 +56,8 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         *,
         progress: Callable[[str], None] | None = None,
     ) -> AssemblyResult:
-        q_before = {arm: robot.current(arm) for arm in robot.arms}
-        try:
+        with _arms_kept(robot):
             return self._plan(problem, robot, motion_planner, progress)
-        finally:
-            for arm, q in q_before.items():  # planning moves the arms around; leave them as they were
-                robot.set_configuration(arm, q)
 
     def _plan(self, problem: AssemblyProblem, robot: Robot, motion_planner: MotionPlanner,
               progress: Callable[[str], None] | None) -> AssemblyResult:
@@ -112,16 +109,12 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         """B's segments only, into A standing at ``T_world_a`` (seen there); the arms start where they are now."""
         s = self.settings
         t0 = time.perf_counter()
-        q_now = {arm: robot.current(arm) for arm in robot.arms}
         goal = assembly_goal_at(problem.part_a, problem.part_b, problem.task, T_world_a, -1, retract=s.retract,
                                 vertical_snap=float(np.radians(s.vertical_snap_deg)))
         result = AssemblyResult(False, Plan(), T_world_a_goal=goal.T_world_a, T_world_b_goal=goal.T_world_b,
                                 details={"v_world": goal.v_world.tolist()})
-        try:
+        with _arms_kept(robot) as q_now:
             res_b = self._plan_b(problem, goal, robot, motion_planner, q_now, progress)
-        finally:
-            for arm, q in q_now.items():
-                robot.set_configuration(arm, q)
         result.details["b"] = res_b
         if not res_b.success:
             return self._fail(result, res_b, f"part B ({problem.part_b.name})", t0, robot)
@@ -183,3 +176,14 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
                     title=f"regrasp graph of part {key.upper()}",
                 )
         return out
+
+
+@contextmanager
+def _arms_kept(robot: Robot) -> Iterator[dict[str, np.ndarray]]:
+    """Yields the arms' configurations now (radians) and puts them back afterwards: planning moves them around."""
+    q_now = {arm: robot.current(arm) for arm in robot.arms}
+    try:
+        yield q_now
+    finally:
+        for arm, q in q_now.items():
+            robot.set_configuration(arm, q)
