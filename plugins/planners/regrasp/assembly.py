@@ -67,6 +67,7 @@ __all__ = [
     "Step",
     "TransferResult",
     "cartesian_path",
+    "feasible_grasps_at",
     "placement_slots",
     "plan_transfer",
     "relocated_slots",
@@ -83,6 +84,11 @@ class AssemblySettings(StrictModel):
         description="a taught v_a this close to straight down at A's goal is made straight down, degrees (0: off)")
     goal_xy: tuple[float, float] = Field((0.40, 0.0), description="where A is assembled on the table (world x, y)")
     goal_yaw: float = Field(0.0, description="yaw of A's goal placement about the table normal")
+    min_goal_grasps: int = Field(
+        3, ge=0, le=100,
+        description="A's goal placement is the one making B's insertion most nearly vertical among those where at "
+        "least this many grasps of B are feasible (IK, collision) when assembled; if none, the one with the most "
+        "(0: always the most vertical, unchecked)")
     placement_yaws: int = Field(4, ge=1, le=24, description="evenly sampled yaws per stable placement")
     max_placements: int = Field(4, ge=0, le=32, description="most probable placements used as middle layers")
     max_candidates: int = Field(40, ge=1, le=500, description="grasps solved by IK per slot after screening")
@@ -266,6 +272,37 @@ def cartesian_path(
     return np.asarray(path), None
 
 
+def _screen_settings(settings: AssemblySettings) -> ScreenSettings:
+    return ScreenSettings(max_candidates=settings.max_candidates, min_down=settings.min_down,
+                          pregrasp_distance=settings.pregrasp_distance)
+
+
+def feasible_grasps_at(
+    robot: Robot,
+    part: PartModel,
+    grasps: Sequence[Grasp],
+    T_world_part: np.ndarray,
+    world: Sequence[Obstacle],
+    settings: AssemblySettings,
+    on_table: bool = False,
+) -> set[int]:
+    """Ids of ``part``'s grasps (not variants) some arm can take with the part at ``T_world_part`` (metres).
+
+    The same test as a layer of the regrasp graph: screen, IK of the best
+    ``settings.max_candidates``, collision of the arm with ``world`` (table
+    named ``"table"`` and other obstacles, not this part), the pre-grasp pose
+    reachable. The robot's obstacles are left holding ``world`` and no arm
+    holds anything.
+    """
+    _set_world(robot, world)
+    for arm in robot.arms:
+        robot.attach(arm, None)
+    slot = PoseSlot("probe", "goal", np.asarray(T_world_part, float))
+    screen = _screen_settings(settings)
+    screened = screen_slot(slot, grasps, world_collider(world), robot.hand, screen, on_table)
+    return _grasp_ids([evaluate_slot(robot, slot, screened, list(robot.arms), settings=screen)])
+
+
 def _grasp_dict(grasps: Sequence[Grasp]) -> dict[int, Grasp]:
     return {g.id: g for g in grasps}
 
@@ -298,11 +335,7 @@ def plan_transfer(
     t0 = time.perf_counter()
     by_id = _grasp_dict(grasps)
     arms = list(robot.arms)
-    screen = ScreenSettings(
-        max_candidates=settings.max_candidates,
-        min_down=settings.min_down,
-        pregrasp_distance=settings.pregrasp_distance,
-    )
+    screen = _screen_settings(settings)
     seeds = {k: np.asarray(v, float).copy() for k, v in q_now.items()}
     collider = world_collider(world)
 

@@ -1,9 +1,10 @@
 """Where the assembly happens: part A's goal on the table, B's assembled and pre-assembly poses.
 
 Part A is put down in one of its stable placements at a chosen spot of the
-table; of the placements, the one that makes B's insertion most nearly
-vertical (``v_a`` pointing down in the world) is preferred, so the
-insertion is a straight move down, with B wholly above the table. B's goal
+table; the placements are ranked by how nearly vertical they make B's
+insertion (``v_a`` pointing down in the world), so that it is a straight
+move down, with B wholly above the table (:func:`ranked_assembly_goals`; the
+planner takes the first at which enough of B's grasps are feasible). B's goal
 is ``T_world_A @ T_A_B``; its pre-assembly pose is that goal moved back
 along ``-v_a`` by the retraction distance (the paper's narrow-passage fix),
 or further where B would otherwise still be inside A (:func:`clear_retraction`).
@@ -39,6 +40,7 @@ __all__ = [
     "assembly_goal_at",
     "choose_assembly_goal",
     "clear_retraction",
+    "ranked_assembly_goals",
 ]
 
 VERTICAL_SNAP = float(np.radians(2.0))
@@ -59,6 +61,46 @@ class AssemblyGoal:
     """Stable placement of A used at the goal."""
 
 
+def ranked_assembly_goals(
+    part_a: PartModel,
+    part_b: PartModel,
+    task: AssemblyTask,
+    placements_a: Sequence[Placement],
+    *,
+    xy: Sequence[float],
+    yaw: float,
+    table_height: float,
+    retract: float,
+    vertical_snap: float = VERTICAL_SNAP,
+) -> list[AssemblyGoal]:
+    """A's goal at each of its placements at ``xy`` (metres) turned by ``yaw`` (radians) about the table normal,
+    best first: insertion most nearly straight down, then the likelier placement.
+
+    ``v_world`` is ``R_world_A @ v_a``, or exactly ``(0, 0, -1)`` when that is
+    within ``vertical_snap`` radians of it (0 turns the snap off). Placements
+    that put the assembled B or its pre-assembly pose below the table are left out.
+
+    Raises :class:`UserError` when no placement of A keeps the assembled B and
+    its pre-assembly pose above the table.
+    """
+    ranked: list[tuple[float, AssemblyGoal]] = []
+    T_xy = compose(from_rotation(np.eye(3), [xy[0], xy[1], table_height]), rot_z(yaw))
+    for p in placements_a:
+        goal = assembly_goal_at(part_a, part_b, task, T_xy @ p.T_table_part, p.id, retract=retract,
+                                vertical_snap=vertical_snap)
+        low_b = min(_lowest(part_b, goal.T_world_b), _lowest(part_b, goal.T_world_b_pre))
+        if low_b < table_height - 1e-4:
+            continue
+        ranked.append((float(-goal.v_world[2]) + 0.05 * p.probability, goal))
+    if not ranked:
+        raise UserError(
+            f"no stable placement of {part_a.name} keeps {part_b.name} above the table when assembled; "
+            "check T_A_B and v_a of the structure"
+        )
+    ranked.sort(key=lambda kg: -kg[0])  # stable: equal keys keep the placements' order
+    return [g for _, g in ranked]
+
+
 def choose_assembly_goal(
     part_a: PartModel,
     part_b: PartModel,
@@ -71,32 +113,9 @@ def choose_assembly_goal(
     retract: float,
     vertical_snap: float = VERTICAL_SNAP,
 ) -> AssemblyGoal:
-    """A's goal placement at ``xy`` (metres) turned by ``yaw`` (radians) about the table normal.
-
-    ``v_world`` is ``R_world_A @ v_a``, or exactly ``(0, 0, -1)`` when that is
-    within ``vertical_snap`` radians of it (0 turns the snap off).
-
-    Raises :class:`UserError` when no placement of A keeps the assembled B and
-    its pre-assembly pose above the table.
-    """
-    best: tuple[float, AssemblyGoal] | None = None
-    T_xy = compose(from_rotation(np.eye(3), [xy[0], xy[1], table_height]), rot_z(yaw))
-    for p in placements_a:
-        goal = assembly_goal_at(part_a, part_b, task, T_xy @ p.T_table_part, p.id, retract=retract,
-                                vertical_snap=vertical_snap)
-        low_b = min(_lowest(part_b, goal.T_world_b), _lowest(part_b, goal.T_world_b_pre))
-        if low_b < table_height - 1e-4:
-            continue
-        # prefer insertion straight down, then the likelier placement
-        key = float(-goal.v_world[2]) + 0.05 * p.probability
-        if best is None or key > best[0]:
-            best = (key, goal)
-    if best is None:
-        raise UserError(
-            f"no stable placement of {part_a.name} keeps {part_b.name} above the table when assembled; "
-            "check T_A_B and v_a of the structure"
-        )
-    return best[1]
+    """The first of :func:`ranked_assembly_goals`: B's insertion most nearly straight down."""
+    return ranked_assembly_goals(part_a, part_b, task, placements_a, xy=xy, yaw=yaw, table_height=table_height,
+                                 retract=retract, vertical_snap=vertical_snap)[0]
 
 
 def assembly_goal_at(

@@ -1,8 +1,12 @@
 """Assembly planner plugin ``regrasp``: A to its goal, then B into A.
 
 Part A is picked at its start pose, regrasped through intermediate stable
-placements if needed, and put down at its goal placement (chosen by
-:mod:`asmteach.plugins.planners.regrasp.goals` so that B goes in from above).
+placements if needed, and put down at its goal placement: of A's placements
+ranked by :mod:`asmteach.plugins.planners.regrasp.goals` (B going in from
+above first), the first at which at least ``min_goal_grasps`` of B's grasps
+are feasible when B is assembled (a slider whose only exposed part, standing
+up, is a rib beside A's face is easier to hold when A lies flat and B slides
+in sideways).
 Part B is picked, carried to the pre-assembly pose (retracted along ``-v_a``)
 and inserted along ``v_a`` in a straight line; only then is it released.
 While A moves, B is an obstacle where it lies; while B moves, A is one at its
@@ -32,10 +36,11 @@ from asmteach.plugins.planners.regrasp.assembly import (
     AssemblySettings,
     PlaceGoal,
     TransferResult,
+    feasible_grasps_at,
     placement_slots,
     plan_transfer,
 )
-from asmteach.plugins.planners.regrasp.goals import AssemblyGoal, assembly_goal_at, choose_assembly_goal
+from asmteach.plugins.planners.regrasp.goals import AssemblyGoal, assembly_goal_at, ranked_assembly_goals
 from asmteach.plugins.planners.regrasp.graph import PoseSlot
 from asmteach.plugins.planners.regrasp.plan_io import render_regrasp_graph, table_obstacle, to_plan
 
@@ -64,13 +69,11 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         s = self.settings
         t0 = time.perf_counter()
         a, b, h = problem.part_a, problem.part_b, problem.table.height
-        goal = choose_assembly_goal(
-            a, b, problem.task, compute_placements(a), xy=s.goal_xy, yaw=s.goal_yaw, table_height=h, retract=s.retract,
-            vertical_snap=float(np.radians(s.vertical_snap_deg)),
-        )
         table = table_obstacle(robot, h)
+        goal, goal_grasps = self._choose_goal(problem, robot, progress)
         q_home = {arm: robot.home(arm) for arm in robot.arms}
-        details: dict = {"goal_placement_a": goal.placement_id, "v_world": goal.v_world.tolist()}
+        details: dict = {"goal_placement_a": goal.placement_id, "v_world": goal.v_world.tolist(),
+                         "goal_grasps_b": goal_grasps}
         result = AssemblyResult(False, Plan(), T_world_a_goal=goal.T_world_a, T_world_b_goal=goal.T_world_b,
                                 details=details)
 
@@ -96,6 +99,33 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         result.plan = self._timed(robot, [("A", a.name, res_a), ("B", b.name, res_b)], t0)
         result.success = True
         return result
+
+    def _choose_goal(self, problem: AssemblyProblem, robot: Robot,
+                     progress: Callable[[str], None] | None) -> tuple[AssemblyGoal, int]:
+        """A's goal: the best ranked at which ``min_goal_grasps`` of B's grasps are feasible when assembled (else
+        the one with the most), and that number."""
+        s, a, b, h = self.settings, problem.part_a, problem.part_b, problem.table.height
+        goals = ranked_assembly_goals(
+            a, b, problem.task, compute_placements(a), xy=s.goal_xy, yaw=s.goal_yaw, table_height=h, retract=s.retract,
+            vertical_snap=float(np.radians(s.vertical_snap_deg)),
+        )
+        if s.min_goal_grasps == 0:
+            return goals[0], -1
+        table = table_obstacle(robot, h)
+        best: tuple[AssemblyGoal, int] | None = None
+        for goal in goals:
+            n = len(feasible_grasps_at(robot, b, problem.grasps_b, goal.T_world_b,
+                                       [table, Obstacle(a.name, a.mesh, goal.T_world_a)], s))
+            if best is None or n > best[1]:
+                best = (goal, n)
+            if n >= s.min_goal_grasps:
+                break
+        assert best is not None  # ranked_assembly_goals raises rather than return none
+        if progress and best[0] is not goals[0]:
+            progress(f"{a.name}: goal placement {best[0].placement_id}, not {goals[0].placement_id} (insertion "
+                     f"{np.degrees(np.arccos(np.clip(-best[0].v_world[2], -1, 1))):.0f} deg from vertical): "
+                     f"{best[1]} grasps of {b.name} are feasible when assembled there")
+        return best
 
     def plan_insertion(
         self,

@@ -183,3 +183,55 @@ def test_plan_insertion_aims_b_at_an_a_seen_off_its_goal(peg_in_hole_plan) -> No
     assert np.linalg.norm(err[:3, 3]) < 2e-4
     for arm, q in q_now.items():  # planning leaves the arms where they were
         np.testing.assert_allclose(robot.current(arm), q, atol=1e-9)
+
+
+def test_goals_are_ranked_by_how_vertical_they_make_the_insertion() -> None:
+    """The T-slot's slider goes in along A's -x: A standing on its end makes that straight down, and comes first;
+    lying flat (A's likeliest placement) makes it horizontal."""
+    from asmteach.plugins.planners.regrasp.goals import ranked_assembly_goals
+
+    task = load_structure("configs/parts/set1/t_slot.yaml")
+    a, b = build_part(task.part_a), build_part(task.part_b)
+    placements = compute_placements(a)
+    goals = ranked_assembly_goals(a, b, task, placements, xy=(0.4, 0.0), yaw=0.0, table_height=0.0, retract=0.05)
+    down = [float(-g.v_world[2]) for g in goals]
+    assert down == sorted(down, reverse=True)
+    np.testing.assert_array_equal(goals[0].v_world, [0.0, 0.0, -1.0])
+    likeliest = max(placements, key=lambda p: p.probability).id
+    flat = next(g for g in goals if g.placement_id == likeliest)
+    assert abs(flat.v_world[2]) < 1e-9
+    first = choose_assembly_goal(a, b, task, placements, xy=(0.4, 0.0), yaw=0.0, table_height=0.0, retract=0.05)
+    assert first.placement_id == goals[0].placement_id
+
+
+@pytest.mark.slow
+def test_a_slider_whose_upright_goal_leaves_one_grasp_is_assembled_with_a_lying_flat() -> None:
+    """Stood on its end, the T-slot leaves only 19 mm of the slider's rib outside it, beside its face, and the
+    Nextage reaches one grasp of it there: the planner puts A down flat and slides B in sideways."""
+    from asmteach.core import registry
+    from asmteach.core.interfaces import AssemblyProblem
+    from asmteach.core.models import TablePlane
+    from asmteach.core.scene import SceneSettings, random_start_poses
+
+    task = load_structure("configs/parts/set1/t_slot.yaml")
+    a, b = build_part(task.part_a), build_part(task.part_b)
+    robot = registry.create("robots", "nextage_pybullet", {"ik": {"max_starts": 4}}, seed=0)
+    try:
+        grasps = registry.create("grasp_planners", "antipodal", {}, seed=0)
+        motion = registry.create("motion_planners", "trrt", {}, seed=0)
+        T_a, T_b = random_start_poses([a, b], 0.0, SceneSettings(), np.random.default_rng([0, 11]))
+        problem = AssemblyProblem(a, b, task, T_a, T_b, grasps.plan(a, robot.hand), grasps.plan(b, robot.hand),
+                                  TablePlane(height=0.0))
+        upright = registry.create("assembly_planners", "regrasp", {"min_goal_grasps": 0}, seed=0)
+        chosen = upright._choose_goal(problem, robot, None)[0]
+        np.testing.assert_array_equal(chosen.v_world, [0.0, 0.0, -1.0])  # unchecked: the most vertical
+        messages: list[str] = []
+        res = registry.create("assembly_planners", "regrasp", {}, seed=0).plan(problem, robot, motion,
+                                                                              progress=messages.append)
+        assert res.success, res.reason
+        assert abs(res.details["v_world"][2]) < 1e-9  # sideways into a lying A
+        assert res.details["goal_grasps_b"] >= 3
+        assert any("goal placement" in m and "grasps of t_slider" in m for m in messages)
+        np.testing.assert_allclose(res.T_world_b_goal, res.T_world_a_goal @ task.T_A_B, atol=1e-12)
+    finally:
+        robot.close()
