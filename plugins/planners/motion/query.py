@@ -9,6 +9,7 @@ callers branch on the kind and print the reason.
 from __future__ import annotations
 
 import enum
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -19,9 +20,18 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import MotionResult
 from asmteach.core.models import StrictModel
 from asmteach.plugins.planners.motion.interpolate import densify
+from asmteach.plugins.planners.motion.shortcut import SegmentChecker, shorten
 from asmteach.plugins.planners.motion.space import JointSpace
 
-__all__ = ["FailureKind", "MotionSettings", "check_query", "default_range", "failure", "finish_path"]
+__all__ = [
+    "FailureKind",
+    "MotionSettings",
+    "check_query",
+    "default_range",
+    "failure",
+    "finish_path",
+    "shorten_batched",
+]
 
 
 class FailureKind(enum.StrEnum):
@@ -48,12 +58,21 @@ class MotionSettings(StrictModel):
     collision_resolution: float = Field(
         0.01, gt=0, description="Motions are checked every this many radians (Euclidean joint-space norm)."
     )
-    simplify: bool = Field(True, description="Shorten the found path with OMPL's og.PathSimplifier.")
+    simplify: bool = Field(
+        True,
+        description="Shorten the found path: with the batched shortener when is_valid has a batch (see .batch), "
+        "else with OMPL's og.PathSimplifier.")
     simplify_max_time: float | None = Field(
         0.5,
         gt=0,
-        description="Seconds for the simplifier; None runs simplifyMax until no change (deterministic, but "
+        description="Seconds for OMPL's simplifier; None runs simplifyMax until no change (deterministic, but "
         "slow with a real robot's collision checks).",
+    )
+    shortcut_attempts: int = Field(
+        10, ge=0,
+        description="Random shortcuts tried by the batched shortener. Each one kept adds a waypoint, where the "
+        "timed path stops: beyond ~10 they cost planning time (70 % of a T-RRT query at 30) and lengthen the "
+        "execution, for 2-4 % shorter joint paths",
     )
 
 
@@ -103,6 +122,28 @@ def _bounds_detail(space: JointSpace, q: np.ndarray) -> str:
 def default_range(space: JointSpace, settings: MotionSettings, fraction: float = 0.2) -> float:
     """The step size in radians: the setting, or ``fraction`` x the space's diagonal (OMPL uses 0.2)."""
     return float(settings.range) if settings.range is not None else fraction * space.space.getMaximumExtent()
+
+
+def shorten_batched(
+    space: JointSpace,
+    path: np.ndarray,
+    settings: MotionSettings,
+    rng: np.random.Generator,
+    *,
+    valid_batch: Callable[[np.ndarray], np.ndarray],
+    cost_batch: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> tuple[np.ndarray, SegmentChecker]:
+    """Shorten a found path (radians) with batched checks (:func:`.shortcut.shorten`); also the segment checker,
+    which counts its calls.
+
+    With ``cost_batch``, shortcuts may not pass through states costlier than the
+    costliest point of the found path (sampled at 4x the motion resolution).
+    """
+    ceiling = math.inf
+    if cost_batch is not None:
+        ceiling = float(np.max(cost_batch(densify(path, 4 * space.resolution))))
+    segment_ok = SegmentChecker(valid_batch, space.resolution, cost_batch=cost_batch, ceiling=ceiling)
+    return shorten(path, segment_ok, rng, attempts=settings.shortcut_attempts), segment_ok
 
 
 def finish_path(

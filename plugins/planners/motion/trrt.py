@@ -60,7 +60,6 @@ from scipy.spatial import cKDTree
 
 from asmteach.core.interfaces import MotionPlanner, MotionResult
 from asmteach.plugins.planners.motion.batch import Batched
-from asmteach.plugins.planners.motion.interpolate import densify
 from asmteach.plugins.planners.motion.query import (
     FailureKind,
     MotionSettings,
@@ -68,8 +67,8 @@ from asmteach.plugins.planners.motion.query import (
     default_range,
     failure,
     finish_path,
+    shorten_batched,
 )
-from asmteach.plugins.planners.motion.shortcut import SegmentChecker, shorten
 from asmteach.plugins.planners.motion.space import JointSpace, seed_ompl
 
 __all__ = ["TRRTPlanner", "TRRTSettings", "inverse_clearance_cost"]
@@ -103,12 +102,6 @@ class TRRTSettings(MotionSettings):
     )
     direct_first: bool = Field(
         True, description="Try the straight motion start -> goal first (taken if valid and not costlier than its ends)."
-    )
-    shortcut_attempts: int = Field(
-        10, ge=0,
-        description="Random shortcuts tried by the batched shortener (used when is_valid has a batch). Each one "
-        "kept adds a waypoint, where the timed path stops: beyond ~10 they cost planning time (70 % of a query at "
-        "30) and lengthen the execution, for 2-4 % shorter joint paths",
     )
     max_iterations: int = Field(200_000, ge=1, description="Upper bound on tree-growing iterations per query.")
 
@@ -436,13 +429,8 @@ class TRRTPlanner(MotionPlanner):
         cfg = self.settings
         if cfg.simplify and checks.valid_batch is not None:
             # Batched checks available: shorten with a few batched calls instead of OMPL's per-state simplifier.
-            ceiling = math.inf
-            if cost is not None:
-                ceiling = float(np.max(checks.costs(densify(raw, 4 * space.resolution))))
-            segment_ok = SegmentChecker(
-                checks.valid_batch, space.resolution, cost_batch=lambda qs: checks.costs(qs), ceiling=ceiling
-            )
-            path = shorten(raw, segment_ok, rng, attempts=cfg.shortcut_attempts)
+            path, segment_ok = shorten_batched(space, raw, cfg, rng, valid_batch=checks.valid_batch,
+                                               cost_batch=checks.costs if cost is not None else None)
             checks.batch_calls += segment_ok.calls
             checks.batch_states += segment_ok.states
         else:

@@ -147,3 +147,22 @@ def test_registered_entry_points_and_settings() -> None:
         registry.create("motion_planners", "trrt", {"temperature_rsie": 0.1})
     with pytest.raises(UserError):
         registry.create("motion_planners", "trrt", {"frontier_ratio": -1})
+
+
+def test_rrtconnect_shortens_with_batched_checks_when_offered(passage2d) -> None:
+    """Given a vectorised validity check, RRTConnect's found path is shortened like T-RRT's (a few batched
+    calls, not OMPL's one python call per state): same seed, same path; valid, ends kept, no longer."""
+    from asmteach.plugins.planners.motion.batch import batched
+
+    world, start, goal = passage2d
+    kw = {"lower": world.lower, "upper": world.upper, "time_limit": 20.0}
+    fast = batched(world.is_valid, world.valid_batch)
+    a = RRTConnectPlanner({"collision_resolution": 0.01}, seed=4).plan(start, goal, is_valid=fast, **kw)
+    b = RRTConnectPlanner({"collision_resolution": 0.01}, seed=4).plan(start, goal, is_valid=fast, **kw)
+    plain = RRTConnectPlanner({"collision_resolution": 0.01}, seed=4).plan(start, goal, is_valid=world.is_valid, **kw)
+    assert a.success and b.success and plain.success
+    assert a.stats["batch_calls"] > 0 and "batch_calls" not in plain.stats
+    assert np.array_equal(a.path, b.path)
+    assert a.stats["raw_length"] == pytest.approx(plain.stats["raw_length"])  # the same tree; only the shortening
+    assert a.stats["length"] <= a.stats["raw_length"] + 1e-9
+    assert_valid_path(a.path, world, start, goal)
