@@ -10,10 +10,8 @@ IK is the expensive step (tens of milliseconds when it fails), so grasps are
 screened first with cheap tests and only the best ``max_candidates`` survivors
 are solved: the open hand swept back along its approach must not touch the
 world (python-fcl), the approach must come from above for a part resting on
-the table, and the TCP must lie within the arm's reach; where the part is
-held off the table (assembled), the hand closed on it must also be clear of
-the world. Grasps feasible at other slots are tried first so that layers
-share grasps (transfer edges).
+the table, and the TCP must lie within the arm's reach. Grasps feasible at
+other slots are tried first so that layers share grasps (transfer edges).
 
 A parallel jaw is symmetric: IK may succeed only for the TCP turned 180 deg
 about its approach axis. Such a solution is a different *grasp variant*;
@@ -31,7 +29,7 @@ import numpy as np
 from asmteach.core.geometry import compose, from_rotation
 from asmteach.core.interfaces import Obstacle, Robot
 from asmteach.core.models import Grasp, HandSpec
-from asmteach.plugins.planners.grasps.hand_geometry import HandBox, MeshCollider, hand_boxes
+from asmteach.plugins.planners.grasps.hand_geometry import MeshCollider, hand_boxes
 from asmteach.plugins.planners.regrasp.graph import GraspFeasibility, PoseSlot
 
 __all__ = [
@@ -63,9 +61,6 @@ class ScreenSettings:
     """Stand-off of the pre-grasp pose along the TCP -z, and the hand sweep checked (metres)."""
     finger_clearance: float = 0.002
     """Per-side opening beyond the grasp width while approaching (metres)."""
-    held_margin: float = 0.0005
-    """Where the part is held at a pose off the table (assembled), the hand closed on it must keep this far
-    from the world (metres): fingers flush with the other part's face would slide along it on the insertion."""
 
 
 def variant_id(grasp_id: int, flipped: bool) -> int:
@@ -107,17 +102,11 @@ def screen_slot(
             continue
         opening = min(g.width + 2.0 * settings.finger_clearance, hand.max_width)
         hit = collider.first_contact(hand_boxes(hand, opening, sweep=settings.pregrasp_distance), T)
-        if hit is None and not on_table:
-            hit = collider.first_contact(_grown(hand_boxes(hand, g.width), settings.held_margin), T)
         if hit is not None:
             rejected[g.id] = f"collision: hand/{hit[0]} with {hit[1]}"
             continue
         passed.append(g)
     return passed, rejected
-
-
-def _grown(boxes: Sequence[HandBox], margin: float) -> list[HandBox]:
-    return [HandBox(b.name, b.center, b.size + 2.0 * margin) for b in boxes]
 
 
 def evaluate_slot(
