@@ -424,12 +424,13 @@ class _Bar:
 
 # ---------------------------------------------------------------- summaries
 def flatten(row: dict[str, Any]) -> dict[str, Any]:
-    """One flat record per trial: grid keys, seed, ok, error, seconds and metrics."""
+    """One flat record per trial: grid keys, seed, ok, error, the trial's wall time (``trial_seconds``, named
+    apart from any metric of an experiment, such as the planning time ``seconds``) and the metrics."""
     flat: dict[str, Any] = {**row.get("point", {}), "seed": row.get("seed"), "ok": row.get("ok")}
     for k, v in (row.get("metrics") or {}).items():
         if isinstance(v, int | float | str | bool) or v is None:
             flat[k] = v
-    flat["seconds"] = row.get("seconds")
+    flat["trial_seconds"] = row.get("seconds")
     flat["error"] = row.get("error") or ""
     return flat
 
@@ -555,13 +556,13 @@ def plot_columns(
 
     The ``preferred`` ones that are numeric come first, in their order; without
     them, the numeric metrics in first-seen order. Falls back to
-    ``["seconds"]`` (trial wall time) when no metric is numeric.
+    ``["trial_seconds"]`` (trial wall time) when no metric is numeric.
     """
     numeric = list(
         dict.fromkeys(k for r in rows if r.get("ok") for k, v in (r.get("metrics") or {}).items() if _is_number(v))
     )
     chosen = [k for k in dict.fromkeys(preferred) if k in numeric] or numeric
-    return chosen[:limit] if chosen else ["seconds"]
+    return chosen[:limit] if chosen else ["trial_seconds"]
 
 
 def plot_axis_key(rows: list[dict[str, Any]]) -> str | None:
@@ -588,7 +589,7 @@ def series_stats(xs: list[float], ys: list[float]) -> tuple[Any, Any, Any, Any]:
 
 
 def _metric_value(row: dict[str, Any], col: str) -> Any:
-    return row.get("seconds") if col == "seconds" else (row.get("metrics") or {}).get(col)
+    return row.get("seconds") if col == "trial_seconds" else (row.get("metrics") or {}).get(col)
 
 
 def summary_figure(rows: list[dict[str, Any]], *, title: str = "", metrics: Iterable[str] = ()) -> Figure | None:
@@ -662,7 +663,7 @@ def summary_figure(rows: list[dict[str, Any]], *, title: str = "", metrics: Iter
                 ax.tick_params(axis="x", labelrotation=30)
         if is_rate:
             ax.set_ylim(-0.05, 1.05)
-        ax.set_title(panel + (" (s)" if panel == "seconds" else ""), fontsize="medium")
+        ax.set_title(panel + (" (s)" if panel.endswith("seconds") else ""), fontsize="medium")
         ax.set_xlabel(x_key or "")
         ax.grid(alpha=0.3)
     for ax in axes[len(panels) :]:

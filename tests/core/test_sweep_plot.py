@@ -26,7 +26,7 @@ def test_axis_key_is_the_grid_key_with_most_values_and_columns_are_numeric_metri
     assert plot_axis_key(rows) == "b"
     assert plot_columns(rows) == ["err", "n"]  # bools and strings are not plotted
     assert plot_columns(rows, preferred=["n", "name", "absent"]) == ["n"]  # declared by the kind, if numeric
-    assert plot_columns([_row({"a": 1}, 0, {"name": "x"})]) == ["seconds"]
+    assert plot_columns([_row({"a": 1}, 0, {"name": "x"})]) == ["trial_seconds"]
     assert plot_axis_key([_row({}, 0)]) is None
     many = [_row({"a": 1}, 0, {f"m{i}": i for i in range(9)})]
     assert len(plot_columns(many)) == 6
