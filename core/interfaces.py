@@ -351,6 +351,11 @@ class Robot(Plugin):
         """Pairs ``(robot link, obstacle)`` in contact at ``q``; for error messages."""
         return []
 
+    def collision_reports(self, arm: str, qs: np.ndarray) -> list[list[tuple[str, str]]]:
+        """:meth:`collision_report` of each of ``qs`` ``(n, dof)``; a robot with a batched checker may do it in
+        one pass (the regrasp planner explains every grasp it rejects for a collision)."""
+        return [self.collision_report(arm, q) for q in np.atleast_2d(np.asarray(qs, float))]
+
     # -- simulation (robots without a simulator may leave these unimplemented)
     def reset_world(self, table: TablePlane, parts: dict[str, tuple[PartModel, np.ndarray]]) -> None:
         """Start a fresh simulated world: the table and parts at ``T_world_part``."""

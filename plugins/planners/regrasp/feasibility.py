@@ -206,12 +206,12 @@ def _collision_free(
     if not idx:
         return []
     hits = np.asarray(robot.in_collision(arm, np.asarray(qs, float)), bool)
-    for i, q, hit in zip(idx, qs, hits, strict=True):
-        if hit:
-            if where:
-                out[jobs[i][0]].rejected[keys[i]] = f"collision: {where}"
-            else:
-                pairs = robot.collision_report(arm, q)
-                out[jobs[i][0]].rejected[keys[i]] = "collision: " + (
-                    ", ".join(f"{a}/{b}" for a, b in pairs) or "unknown pair")
+    bad = [k for k, hit in enumerate(hits) if hit]
+    if where:
+        reasons = [f"collision: {where}"] * len(bad)
+    else:
+        reports = robot.collision_reports(arm, np.asarray([qs[k] for k in bad], float)) if bad else []
+        reasons = ["collision: " + (", ".join(f"{a}/{b}" for a, b in pairs) or "unknown pair") for pairs in reports]
+    for k, reason in zip(bad, reasons, strict=True):
+        out[jobs[idx[k]][0]].rejected[keys[idx[k]]] = reason
     return [i for i, hit in zip(idx, hits, strict=True) if not hit]

@@ -188,6 +188,10 @@ class ArmRobot(Robot):
         self._arm(arm)
         return self.checker.report(arm, q)
 
+    def collision_reports(self, arm: str, qs: np.ndarray) -> list[list[tuple[str, str]]]:
+        self._arm(arm)
+        return self.checker.reports(arm, qs)
+
     # ------------------------------------------------------------ simulation
     @property
     def sim(self) -> PyBulletWorld:

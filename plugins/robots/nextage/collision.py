@@ -319,6 +319,16 @@ class CollisionChecker:
         pairs = [(objs[A[p]].link, objs[B[p]].link) for p in pi[hit]]
         return sorted(set(pairs))
 
+    def reports(self, arm: str, qs: np.ndarray, *, ignore: Sequence[str] = ()) -> list[list[tuple[str, str]]]:
+        """:meth:`report` of each of ``qs`` ``(n, dof)``, in one pass over all of them."""
+        qs = np.atleast_2d(self.kin.check_limits(arm, qs))
+        objs, A, B, _ = self._pair_set(arm, ignore)
+        _, _, ci, pi, hit = self._hits(arm, qs, ignore, stop_early=False)
+        out: list[set[tuple[str, str]]] = [set() for _ in range(qs.shape[0])]
+        for c, p in zip(ci[hit], pi[hit], strict=True):
+            out[c].add((objs[A[p]].link, objs[B[p]].link))
+        return [sorted(pairs) for pairs in out]
+
     def clearance(self, arm: str, qs: np.ndarray, upto: float = np.inf) -> np.ndarray:
         """``(n,)`` minimum distance (metres, 0 when touching) from the moving robot geometry and the
         held part to the table and the obstacles; distances of ``upto`` or more come back as ``upto``.

@@ -28,6 +28,10 @@ def test_home_is_free_and_known_contacts_are_found(robot: NextagePyBullet) -> No
     off[1] = robot.joint_limits("left")[0][1]
     assert ("LARM_JOINT1_Link", "CHEST_JOINT0_Link") in robot.collision_report("left", off)
     assert robot.in_collision("left", np.stack([robot.home("left"), np.zeros(6), off])).tolist() == [False, True, True]
+    # the batched report, one pass over all three, says what each single report says
+    qs = np.stack([robot.home("left"), np.zeros(6), off])
+    assert robot.collision_reports("left", qs) == [robot.collision_report("left", q) for q in qs]
+    assert robot.collision_reports("left", qs)[0] == []
 
 
 def test_table_and_parts(robot: NextagePyBullet) -> None:
