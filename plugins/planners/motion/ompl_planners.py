@@ -4,8 +4,8 @@
 LaValle 2000) on the same :class:`~asmteach.plugins.planners.motion.space.JointSpace`
 as T-RRT, so the two are swap-ins: same query, same validity and motion checks,
 same simplifier (the batched shortener when ``is_valid`` has a batch, else
-OMPL's; OMPL's checks one state per python call and took 85 % of an
-RRTConnect assembly plan). RRTConnect ignores the cost map (it only looks for
+OMPL's; OMPL's checks one state per python call and took 78 % of a
+peg-in-hole assembly plan). RRTConnect ignores the cost map (it only looks for
 a feasible path); the cost, when given, only keeps the simplifier from
 shortcutting through states costlier than the costliest point of the found
 path. Its own tree search checks one state per call (OMPL's motion validator).
