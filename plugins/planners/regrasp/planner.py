@@ -70,7 +70,7 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         t0 = time.perf_counter()
         a, b, h = problem.part_a, problem.part_b, problem.table.height
         table = table_obstacle(robot, h)
-        goal, goal_grasps = self._choose_goal(problem, robot, progress)
+        goal, goal_grasps = self._choose_goal(problem, robot, table, progress)
         q_home = {arm: robot.home(arm) for arm in robot.arms}
         details: dict = {"goal_placement_a": goal.placement_id, "v_world": goal.v_world.tolist(),
                          "goal_grasps_b": goal_grasps}
@@ -100,7 +100,7 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         result.success = True
         return result
 
-    def _choose_goal(self, problem: AssemblyProblem, robot: Robot,
+    def _choose_goal(self, problem: AssemblyProblem, robot: Robot, table: Obstacle,
                      progress: Callable[[str], None] | None) -> tuple[AssemblyGoal, int]:
         """A's goal: the best ranked at which ``min_goal_grasps`` of B's grasps are feasible when assembled (else
         the one with the most), and that number."""
@@ -111,7 +111,6 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         )
         if s.min_goal_grasps == 0:
             return goals[0], -1
-        table = table_obstacle(robot, h)
         best: tuple[AssemblyGoal, int] | None = None
         for goal in goals:
             n = len(feasible_grasps_at(robot, b, problem.grasps_b, goal.T_world_b,

@@ -212,6 +212,7 @@ def test_a_slider_whose_upright_goal_leaves_one_grasp_is_assembled_with_a_lying_
     from asmteach.core.interfaces import AssemblyProblem
     from asmteach.core.models import TablePlane
     from asmteach.core.scene import SceneSettings, random_start_poses
+    from asmteach.plugins.planners.regrasp.plan_io import table_obstacle
 
     task = load_structure("configs/parts/set1/t_slot.yaml")
     a, b = build_part(task.part_a), build_part(task.part_b)
@@ -223,7 +224,7 @@ def test_a_slider_whose_upright_goal_leaves_one_grasp_is_assembled_with_a_lying_
         problem = AssemblyProblem(a, b, task, T_a, T_b, grasps.plan(a, robot.hand), grasps.plan(b, robot.hand),
                                   TablePlane(height=0.0))
         upright = registry.create("assembly_planners", "regrasp", {"min_goal_grasps": 0}, seed=0)
-        chosen = upright._choose_goal(problem, robot, None)[0]
+        chosen = upright._choose_goal(problem, robot, table_obstacle(robot, 0.0), None)[0]
         np.testing.assert_array_equal(chosen.v_world, [0.0, 0.0, -1.0])  # unchecked: the most vertical
         messages: list[str] = []
         res = registry.create("assembly_planners", "regrasp", {}, seed=0).plan(problem, robot, motion,
