@@ -6,6 +6,8 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 OUT    ?= out/demo
+# pytest processes; the slow end-to-end tests take minutes each, so two cores halve the suite's time
+TEST_WORKERS ?= 2
 
 .PHONY: demo test lint install clean
 
@@ -28,7 +30,7 @@ lint: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS)
 
 clean:
 	rm -rf $(VENV) out build *.egg-info
