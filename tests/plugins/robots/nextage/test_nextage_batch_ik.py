@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from scipy.spatial.transform import Rotation
 
 from asmteach.core.interfaces import IKResult, Robot
-from asmteach.plugins.robots.nextage.batch_ik import _ChainSolver, _log6_error, ik_many
+from asmteach.plugins.robots.nextage.batch_ik import _ChainSolver, _log6_error, _rotvec, ik_many
 from asmteach.plugins.robots.nextage.robot import NextagePyBullet
 
 FLIP = np.diag([-1.0, -1.0, 1.0, 1.0])
@@ -113,3 +114,46 @@ def test_default_ik_many_solves_one_after_the_other() -> None:
     assert [r.q.tolist() for r in OneAtATime().ik_many("a", T)] == [[1, -1], [2, -1], [3, -1]]
     seeds = np.array([[7.0, 0], [8, 0], [9, 0]])
     assert [r.q[1] for r in OneAtATime().ik_many("a", T, seeds)] == [7, 8, 9]
+
+
+@pytest.mark.parametrize("arm", ["left", "right"])
+def test_batched_fk_and_jacobian_match_pinocchio(robot: NextagePyBullet, arm: str) -> None:
+    lo, hi = robot.joint_limits(arm)
+    qs = np.random.default_rng(5).uniform(lo, hi, size=(25, len(lo)))
+    T, J = _ChainSolver(robot.kin, robot.kin.chain(arm)).fk_jac(qs)
+    for k, q in enumerate(qs):
+        assert np.allclose(T[k], robot.fk(arm, q), atol=1e-12)
+        # pinocchio's LOCAL_WORLD_ALIGNED Jacobian: world axes, about the TCP
+        assert np.allclose(J[k], robot.jacobian(arm, q), atol=1e-12)
+
+
+def test_rotation_log_is_exact_near_pi_and_near_zero() -> None:
+    rng = np.random.default_rng(2)
+    axes = rng.normal(size=(60, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    # every Shepperd case: angles near pi about each axis, tiny angles, and random ones
+    angles = np.concatenate([np.pi - np.logspace(-9, -1, 20), np.logspace(-10, -2, 20), rng.uniform(0, np.pi, 20)])
+    R = Rotation.from_rotvec(axes * angles[:, None]).as_matrix()
+    w = _rotvec(R)
+    ref = Rotation.from_matrix(R).as_rotvec()
+    assert np.allclose(w, ref, atol=1e-9)
+    assert np.allclose(np.linalg.norm(w, axis=1), angles, atol=1e-9)
+    assert np.allclose(_rotvec(np.eye(3)[None]), 0.0)
+
+
+def test_rows_of_one_target_stop_once_a_preferred_row_converges(robot: NextagePyBullet) -> None:
+    solver = _ChainSolver(robot.kin, robot.kin.chain("right"))
+    T = _reachable(robot, "right", 30, seed=9)
+    lo, hi = robot.joint_limits("right")
+    starts = np.random.default_rng(1).uniform(lo, hi, size=(30 * 4, len(lo)))
+    rows_T = np.repeat(T, 4, axis=0)
+    ok_all, q_all, _, _ = solver.dls(rows_T, starts)
+    ok, q, _, _ = solver.dls(rows_T, starts, group=4)
+    ok_all, ok = ok_all.reshape(30, 4), ok.reshape(30, 4)
+    assert ok.any(axis=1).tolist() == ok_all.any(axis=1).tolist()
+    assert ok.sum() < ok_all.sum()  # later rows of solved targets stopped
+    first = np.argmax(ok_all, axis=1)
+    solved = ok_all.any(axis=1)
+    assert np.array_equal(np.argmax(ok, axis=1)[solved], first[solved])
+    r = np.flatnonzero(solved)
+    assert np.allclose(q.reshape(30, 4, -1)[r, first[r]], q_all.reshape(30, 4, -1)[r, first[r]], atol=0)
