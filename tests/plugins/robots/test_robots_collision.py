@@ -150,3 +150,41 @@ def test_a_held_part_closes_the_fingers_of_the_collision_model_on_it(robot: Next
     assert values() == pytest.approx(list(opened))
     assert closed_free and robot.in_collision("left", q[None])[0]
     robot.set_obstacles([])
+
+
+def test_batch_verdict_equals_every_candidate_pair_tested_with_fcl(robot: NextagePyBullet) -> None:
+    import fcl
+    import pinocchio as pin
+
+    from asmteach.plugins.robots.nextage.collision import _tf
+
+    # a block and a held peg, so that boxes, cylinders and meshes all meet
+    T = np.eye(4)
+    T[:3, 3] = (0.35, -0.2, 0.06)
+    robot.set_obstacles([Obstacle("block", trimesh.creation.box((0.12, 0.1, 0.12)), T)])
+    spec = PartSpec(name="peg", solid=SolidSpec(add=[Primitive(shape="cylinder", radius=0.01, height=0.08)]))
+    peg = PartModel(spec=spec, mesh=trimesh.creation.cylinder(0.01, 0.08), mass=0.05, center_of_mass=np.zeros(3))
+    held = np.eye(4)
+    held[2, 3] = 0.05
+    robot.attach("right", peg, held)
+    lo, hi = robot.joint_limits("right")
+    qs = np.random.default_rng(11).uniform(lo, hi, size=(150, 6))
+    ch = robot.checker
+    objs, A, B, _ = ch._pair_set("right", ())
+    poses = ch._poses("right", qs, objs)
+    kin = ch.kin
+    for i in (0, 1):  # the geometry frames are the joints' (pinocchio FK) times their placements
+        pin.forwardKinematics(kin.model, kin.data, kin.full_q("right", qs[i]))
+        for k, g in enumerate(objs):
+            J = np.eye(4) if g.joint < 0 else kin.T_world_base @ kin.data.oMi[g.joint].homogeneous
+            assert np.allclose(poses[i, k], J @ g.placement, atol=1e-12)
+    brute = np.zeros(len(qs), bool)
+    for i in range(len(qs)):
+        for a, b in zip(A, B, strict=True):
+            objs[a].fcl_obj.setTransform(_tf(poses[i, a]))
+            objs[b].fcl_obj.setTransform(_tf(poses[i, b]))
+            if fcl.collide(objs[a].fcl_obj, objs[b].fcl_obj, fcl.CollisionRequest(), fcl.CollisionResult()) > 0:
+                brute[i] = True
+                break
+    assert 10 < brute.sum() < len(qs) - 10
+    assert np.array_equal(robot.in_collision("right", qs), brute)

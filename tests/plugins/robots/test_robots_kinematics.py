@@ -94,3 +94,21 @@ def test_jacobian_matches_finite_differences(robot: NextagePyBullet) -> None:
         dq[k] = eps
         T1 = robot.fk("left", q + dq)
         assert np.allclose((T1[:3, 3] - T0[:3, 3]) / eps, J[:3, k], atol=1e-5)
+
+
+@pytest.mark.parametrize("arm", ["left", "right"])
+def test_batched_joint_poses_match_pinocchio(robot: NextagePyBullet, arm: str) -> None:
+    import pinocchio as pin
+
+    kin = robot.kin
+    lo, hi = robot.joint_limits(arm)
+    qs = np.random.default_rng(7).uniform(lo, hi, size=(9, len(lo)))
+    moving, static = kin.batch_joint_poses(arm, qs)
+    assert set(moving) == set(kin.moving_joints(arm)) and len(moving) > len(lo)  # the hand's joints too
+    for i, q in enumerate(qs):
+        pin.forwardKinematics(kin.model, kin.data, kin.full_q(arm, q))
+        for j, T in moving.items():
+            assert np.allclose(T[i], kin.T_world_base @ kin.data.oMi[j].homogeneous, atol=1e-12)
+    pin.forwardKinematics(kin.model, kin.data, kin.q_full)
+    for j in range(kin.model.njoints):
+        assert np.allclose(static[j], kin.T_world_base @ kin.data.oMi[j].homogeneous, atol=1e-12)
