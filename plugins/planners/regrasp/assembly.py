@@ -294,9 +294,7 @@ def feasible_grasps_at(
     reachable. The robot's obstacles are left holding ``world`` and no arm
     holds anything.
     """
-    _set_world(robot, world)
-    for arm in robot.arms:
-        robot.attach(arm, None)
+    _reset_world(robot, world)
     slot = PoseSlot("probe", "goal", np.asarray(T_world_part, float))
     screen = _screen_settings(settings)
     screened = screen_slot(slot, grasps, world_collider(world), robot.hand, screen, on_table)
@@ -346,9 +344,7 @@ def plan_transfer(
     start_slot = PoseSlot("start", "start", np.asarray(T_start, float))
 
     def start_and_goal() -> list[GraspFeasibility]:
-        _set_world(robot, world)
-        for arm in arms:
-            robot.attach(arm, None)
+        _reset_world(robot, world)
         start = evaluate(start_slot)
         return [start, evaluate(goal.slot, goal.on_table, prefer=_grasp_ids([start]))]
 
@@ -368,9 +364,7 @@ def plan_transfer(
     def middle_layers(slots: list[PoseSlot], prefer: set[int]) -> list[GraspFeasibility]:
         screens = [screen_slot(slot, grasps, collider, robot.hand, screen) for slot in slots]
         total = Counter(g.id for passed, _ in screens for g in passed)
-        _set_world(robot, world)  # a failed realisation may have left other obstacles or a held part
-        for arm in arms:
-            robot.attach(arm, None)
+        _reset_world(robot, world)  # a failed realisation may have left other obstacles or a held part
         shared = [{gid: n - (gid in {g.id for g in passed}) for gid, n in total.items()}
                   for passed, _ in screens]  # per slot: the other slots passing each grasp
         return evaluate_slots(robot, slots, screens, arms, settings=screen, prefer=prefer, shared=shared,
@@ -477,6 +471,13 @@ def _grasp_ids(layers: Sequence[GraspFeasibility]) -> set[int]:
 def _set_world(robot: Robot, world: Sequence[Obstacle], *extra: Obstacle) -> None:
     """The robot's obstacles: ``world`` and ``extra`` without the table, which the robot models itself."""
     robot.set_obstacles([o for o in world if o.name != "table"] + list(extra))
+
+
+def _reset_world(robot: Robot, world: Sequence[Obstacle]) -> None:
+    """The robot's obstacles hold ``world`` (:func:`_set_world`) and no arm holds anything."""
+    _set_world(robot, world)
+    for arm in robot.arms:
+        robot.attach(arm, None)
 
 
 def _rounded(stats: dict[str, Any]) -> dict[str, Any]:

@@ -130,7 +130,7 @@ def assembly_goal_at(
 ) -> AssemblyGoal:
     """The goal with A at ``T_world_a`` (metres): B at ``T_world_a @ T_A_B``, its pre-assembly pose behind it.
 
-    The insertion direction is snapped to straight down as :func:`choose_assembly_goal` does;
+    The insertion direction is snapped to straight down as :func:`ranked_assembly_goals` does;
     also used for an A already standing somewhere (seen at its goal), to aim B at it.
     """
     v_a = np.asarray(task.v_a, float)

@@ -313,11 +313,7 @@ class CollisionChecker:
 
     def report(self, arm: str, q: np.ndarray, *, ignore: Sequence[str] = ()) -> list[tuple[str, str]]:
         """Pairs ``(robot link or held part, other link or obstacle)`` in contact at ``q``."""
-        qs = np.atleast_2d(self.kin.check_limits(arm, q))
-        objs, A, B, _ = self._pair_set(arm, ignore)
-        _, _, _, pi, hit = self._hits(arm, qs, ignore, stop_early=False)
-        pairs = [(objs[A[p]].link, objs[B[p]].link) for p in pi[hit]]
-        return sorted(set(pairs))
+        return self.reports(arm, np.asarray(q, dtype=float).reshape(1, -1), ignore=ignore)[0]
 
     def reports(self, arm: str, qs: np.ndarray, *, ignore: Sequence[str] = ()) -> list[list[tuple[str, str]]]:
         """:meth:`report` of each of ``qs`` ``(n, dof)``, in one pass over all of them."""
