@@ -525,6 +525,39 @@ class _Checker:
         return int(np.argmax(hits)) if np.any(hits) else None
 
 
+@dataclass(frozen=True)
+class _Scene:
+    """What the robot's checker holds while one free motion is planned: the obstacles beyond ``world``,
+    the part held (arm, part, ``T_tcp_part``, jaw width in metres) and every arm's configuration (radians)."""
+
+    extra: tuple[Obstacle, ...]
+    held: tuple[str, PartModel, np.ndarray, float] | None
+    q: dict[str, np.ndarray]
+
+    def apply(self, robot: Robot, world: Sequence[Obstacle]) -> None:
+        _set_world(robot, world, *self.extra)
+        for arm in robot.arms:
+            if self.held is not None and self.held[0] == arm:
+                robot.attach(arm, self.held[1], self.held[2], width=self.held[3])
+            else:
+                robot.attach(arm, None)
+        for arm, q in self.q.items():
+            robot.set_configuration(arm, q)
+
+
+@dataclass(frozen=True)
+class _FreeMotion:
+    """A free motion left for the motion planner: ``steps[step]`` gets its path."""
+
+    step: int
+    arm: str
+    q_a: np.ndarray
+    q_b: np.ndarray
+    edge: tuple[Any, Any]
+    what: str
+    scene: _Scene
+
+
 def _realise(
     robot: Robot,
     planner: MotionPlanner,
@@ -538,13 +571,37 @@ def _realise(
     settings: AssemblySettings,
 ) -> tuple[list[Step], dict[str, np.ndarray], list[dict[str, Any]], float]:
     """Keyframes to paths and the least clearance (m) of the free motions; raises
-    :class:`_MotionFailure` with the edge to ban."""
+    :class:`_MotionFailure` with the edge to ban.
+
+    Two passes: first every keyframe (IK) and straight line (Cartesian IK and
+    collision), each free motion's end checked for collision and left as a
+    query; then the motion planner's queries, in order. A keyframe sequence
+    that fails at a straight line (an insertion whose fingers meet the other
+    part, say) then costs milliseconds, not the free motions planned before it.
+    """
     nodes = search.nodes
     steps: list[Step] = []
     keyframes: list[dict[str, Any]] = []
+    queries: list[_FreeMotion] = []
     q_cur = {k: np.asarray(v, float).copy() for k, v in q_now.items()}
-    clearances: list[float] = []
+    q_set: dict[str, np.ndarray] = {}  # the configurations the robot holds now
+    extra: tuple[Obstacle, ...] = ()
+    held: tuple[str, PartModel, np.ndarray, float] | None = None
     T_part = G.nodes[nodes[0]]["slot"].T_world_part  # where the part lies now
+
+    def put(arm: str, q: np.ndarray) -> None:
+        robot.set_configuration(arm, q)
+        q_set[arm] = np.asarray(q, float).copy()
+
+    def free(arm: str, q_a: np.ndarray, q_b: np.ndarray, edge: tuple[Any, Any], what: str, label: str) -> None:
+        """Leave a free motion for the second pass; its end must be collision-free in the robot's world now."""
+        if bool(robot.in_collision(arm, np.asarray(q_b, float)[None, :])[0]):
+            # No motion to it can succeed, whatever edge leads there: ban the node.
+            raise _MotionFailure(edge, f"{what}: {FailureKind.GOAL_INVALID.value}", node=edge[1])
+        queries.append(_FreeMotion(len(steps), arm, np.asarray(q_a, float), np.asarray(q_b, float), edge, what,
+                                   _Scene(extra, held, dict(q_set))))
+        steps.append(Step(label, "path", arm))
+
     i = 0
     while i < len(nodes):
         # one hold: pick at nodes[i], carry (transfer edges) to nodes[j]
@@ -561,39 +618,39 @@ def _realise(
         final = place[0] == goal.slot.name and j == len(nodes) - 1
         chk = _Checker(robot, arm)
 
-        def plan_free(q_a: np.ndarray, q_b: np.ndarray, edge: tuple[Any, Any], what: str, arm: str = arm) -> np.ndarray:
-            return _free(robot, planner, arm, q_a, q_b, settings, edge, what, clearances)
-
         # 0. the other arms go home (the grasp graph was screened with them there) and stay put
         robot.attach(arm, None)
-        _set_world(robot, world, Obstacle(part.name, part.mesh, T_part))
+        held = None
+        extra = (Obstacle(part.name, part.mesh, T_part),)
+        _set_world(robot, world, *extra)
         for a in robot.arms:
-            robot.set_configuration(a, q_cur[a])
+            put(a, q_cur[a])
         for other in robot.arms:
             if other != arm and not np.allclose(q_cur[other], robot.home(other)):
-                path = _free(robot, planner, other, q_cur[other], robot.home(other), settings, (into, pick),
-                             f"{other} arm home before the {arm} arm picks", clearances)
-                steps.append(Step(f"{other} arm home", "path", other, path))
+                free(other, q_cur[other], robot.home(other), (into, pick),
+                     f"{other} arm home before the {arm} arm picks", f"{other} arm home")
                 q_cur[other] = robot.home(other)
-                robot.set_configuration(other, q_cur[other])
+                put(other, q_cur[other])
         # 1. free motion to the pre-grasp pose; the part is an obstacle where it lies
         T_grasp = slot_pick.T_world_part @ variant_tcp(grasps, vid)
         pre = robot.ik(arm, approach_offset(T_grasp, settings.pregrasp_distance), q_seed=G.nodes[pick]["q"])
         if not pre.success or pre.q is None or getattr(pre, "flipped", False):
             raise _MotionFailure((into, pick), f"pre-grasp pose at {pick[0]} has no IK solution", node=pick)
-        steps.append(Step(f"move to pre-grasp {vid} of {part.name} at {pick[0]}", "path", arm,
-                          plan_free(q_cur[arm], pre.q, (into, pick), f"motion to the pre-grasp at {pick[0]}")))
+        free(arm, q_cur[arm], pre.q, (into, pick), f"motion to the pre-grasp at {pick[0]}",
+             f"move to pre-grasp {vid} of {part.name} at {pick[0]}")
         keyframes.append({"name": f"pregrasp_{pick[0]}", "arm": arm, "q": np.asarray(pre.q).tolist()})
         # 2. straight approach without the part as obstacle (the fingers go around it)
+        extra = ()
         _set_world(robot, world)
         down = _line(robot, chk, arm, pre.q, T_grasp, settings, (into, pick), f"approach at {pick[0]}", node=pick)
         steps.append(Step(f"approach grasp {vid}", "path", arm, down))
         keyframes.append({"name": f"grasp_{pick[0]}", "arm": arm, "q": down[-1].tolist()})
+        width = grasps[vid // 2].width
         steps.append(Step(f"close on {part.name}", "gripper", arm,
-                          event=GripperEvent(arm=arm, action="close", width=grasps[vid // 2].width,
-                                             attach=part.name)))
+                          event=GripperEvent(arm=arm, action="close", width=width, attach=part.name)))
         T_tcp_now = robot.fk(arm, down[-1])
-        robot.attach(arm, part, np.linalg.inv(T_tcp_now) @ slot_pick.T_world_part, width=grasps[vid // 2].width)
+        held = (arm, part, np.linalg.inv(T_tcp_now) @ slot_pick.T_world_part, width)
+        robot.attach(arm, part, held[2], width=width)
         # 3. lift straight up (the part leaves the table it touched)
         T_lift = T_tcp_now.copy()
         T_lift[2, 3] += settings.lift
@@ -608,8 +665,8 @@ def _realise(
         above = robot.ik(arm, T_above, q_seed=G.nodes[place]["q"])
         if not above.success or above.q is None or getattr(above, "flipped", False):
             raise _MotionFailure((pick, nodes[i + 1]), f"no IK solution above {place[0]}", node=place)
-        steps.append(Step(f"carry {part.name} to {place[0]}", "path", arm,
-                          plan_free(up[-1], above.q, (pick, nodes[i + 1]), f"carrying {part.name} to {place[0]}")))
+        free(arm, up[-1], above.q, (pick, nodes[i + 1]), f"carrying {part.name} to {place[0]}",
+             f"carry {part.name} to {place[0]}")
         keyframes.append({"name": f"{'preassembly' if final and not goal.on_table else 'above'}_{place[0]}",
                           "arm": arm, "q": np.asarray(above.q).tolist()})
         # 5. final straight move: place on the table, or insert along v_a
@@ -626,6 +683,7 @@ def _realise(
         # 6. release and back off along the approach axis
         steps.append(Step(f"release {part.name}", "gripper", arm, event=GripperEvent(arm=arm, action="open")))
         robot.attach(arm, None)
+        held = None
         T_part = slot_place.T_world_part
         back = _line(robot, chk, arm, last[-1],
                      approach_offset(robot.fk(arm, last[-1]), settings.pregrasp_distance), settings,
@@ -634,17 +692,23 @@ def _realise(
         q_cur[arm] = back[-1]
         i = j + 1  # the edge after a hold is a transit (regrasp at that slot) or the end
     # 7. home, with the part now an obstacle where it was placed
-    _set_world(robot, world, Obstacle(part.name, part.mesh, T_part))
+    extra = (Obstacle(part.name, part.mesh, T_part),)
+    _set_world(robot, world, *extra)
     for arm in robot.arms:
         home = robot.home(arm)
         for other in robot.arms:
-            robot.set_configuration(other, q_cur[other])
+            put(other, q_cur[other])
         if np.allclose(q_cur[arm], home):
             continue
-        path = _free(robot, planner, arm, q_cur[arm], home, settings, (nodes[-1], GOAL), f"{arm} arm back home",
-                     clearances)
-        steps.append(Step(f"{arm} arm home", "path", arm, path))
+        free(arm, q_cur[arm], home, (nodes[-1], GOAL), f"{arm} arm back home", f"{arm} arm home")
         q_cur[arm] = home
+    end = _Scene(extra, None, dict(q_set))
+    # second pass: the motion planner, in the order the robot moves
+    clearances: list[float] = []
+    for m in queries:
+        m.scene.apply(robot, world)
+        steps[m.step].path = _free(robot, planner, m.arm, m.q_a, m.q_b, settings, m.edge, m.what, clearances)
+    end.apply(robot, world)
     return steps, q_cur, keyframes, (min(clearances) if clearances else float("nan"))
 
 

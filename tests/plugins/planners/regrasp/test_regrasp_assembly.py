@@ -236,3 +236,49 @@ def test_a_slider_whose_upright_goal_leaves_one_grasp_is_assembled_with_a_lying_
         np.testing.assert_allclose(res.T_world_b_goal, res.T_world_a_goal @ task.T_A_B, atol=1e-12)
     finally:
         robot.close()
+
+
+class _CountingPlanner:
+    """A motion planner that counts its queries and passes them on."""
+
+    def __init__(self, inner) -> None:
+        self.inner, self.calls = inner, 0
+
+    def plan(self, *args, **kwargs):
+        self.calls += 1
+        return self.inner.plan(*args, **kwargs)
+
+    def __getattr__(self, name: str):
+        return getattr(self.inner, name)
+
+
+@pytest.mark.slow
+def test_keyframe_sequences_failing_at_a_straight_line_never_reach_the_motion_planner() -> None:
+    """Notched block, seed 0: eight of B's keyframe sequences end in an insertion whose fingers meet A, and
+    one of each part's carries ends in collision. Lines and ends are checked before any free motion is
+    planned, so the motion planner sees only the free motions of the plan that succeeds."""
+    from asmteach.core import registry
+    from asmteach.core.interfaces import AssemblyProblem
+    from asmteach.core.models import TablePlane
+    from asmteach.core.scene import SceneSettings, random_start_poses
+
+    task = load_structure("configs/parts/set1/notched_block.yaml")
+    a, b = build_part(task.part_a), build_part(task.part_b)
+    robot = registry.create("robots", "nextage_pybullet", {"ik": {"max_starts": 4}}, seed=0)
+    try:
+        grasps = registry.create("grasp_planners", "antipodal", {}, seed=0)
+        motion = _CountingPlanner(registry.create("motion_planners", "trrt", {}, seed=0))
+        T_a, T_b = random_start_poses([a, b], 0.0, SceneSettings(), np.random.default_rng([0, 11]))
+        problem = AssemblyProblem(a, b, task, T_a, T_b, grasps.plan(a, robot.hand), grasps.plan(b, robot.hand),
+                                  TablePlane(height=0.0))
+        messages: list[str] = []
+        res = registry.create("assembly_planners", "regrasp", {}, seed=0).plan(problem, robot, motion,
+                                                                              progress=messages.append)
+        assert res.success, res.reason
+        assert sum("insertion at assembled: collision" in m for m in messages) >= 3
+        assert any("goal in collision" in m for m in messages)
+        free = [s for s in res.plan.segments if s.trajectory is not None
+                and (s.label.startswith(("move to pre-grasp", "carry")) or s.label.endswith("home"))]
+        assert motion.calls == len(free)
+    finally:
+        robot.close()
