@@ -50,3 +50,23 @@ def test_cost_ceiling_keeps_the_detour() -> None:
     assert hill(densify(out, 0.01)).max() <= ceiling * 1.05
     assert length(out) <= length(path) + 1e-9
     assert np.min(np.linalg.norm(densify(out, 0.01), axis=1)) > 1.0
+
+
+def test_a_segment_over_the_ceiling_is_refused_before_its_fine_states() -> None:
+    """The verdict is every check's; the order only decides what a refused segment costs."""
+    calls: list[int] = []
+
+    def free(qs: np.ndarray) -> np.ndarray:
+        calls.append(len(qs))
+        return np.ones(len(qs), dtype=bool)
+
+    def hill(qs: np.ndarray) -> np.ndarray:
+        return np.exp(-np.sum(np.atleast_2d(qs) ** 2, axis=1))
+
+    seg = SegmentChecker(free, 0.01, cost_batch=hill, ceiling=0.5)
+    a, b = np.array([-1.0, 0.0]), np.array([1.0, 0.0])  # 199 states between, the hill's top (1.0) at the middle
+    assert not seg(a, b)
+    assert calls == [25] and seg.cost_calls == 1  # the coarse states only: every 8th
+    aside = np.array([0.0, 2.0])
+    assert seg(a + aside, b + aside)  # the same segment 2 rad aside: cost <= e^-4 everywhere
+    assert calls[1:] == [25, 174] and seg.cost_calls == 2

@@ -128,3 +128,33 @@ def test_inverse_clearance_cost_floor_cap_and_batch() -> None:
     assert not hasattr(plain, "batch") and plain(np.array([0.25])) == pytest.approx(4.0)
     with pytest.raises(ValueError, match="floor < cap"):
         inverse_clearance_cost(clearance, floor=0.5, cap=0.1)
+
+
+def test_direct_check_batched_agrees_with_every_state_and_stops_at_the_coarse_ones() -> None:
+    """The straight-motion test, batched (every 8th state first, validity then cost): the verdict of checking
+    every state at the resolution, on lines that are free, blocked, or climb the cost map between free ends."""
+    from asmteach.plugins.planners.motion.space import JointSpace
+    from asmteach.plugins.planners.motion.trrt import _Checks
+
+    world = JointWorld(-np.pi * np.ones(2), np.pi * np.ones(2), [Box(np.array([0.0, 1.5]), np.array([0.3, 0.3]))])
+    checks = vectorised(world)
+    sizes: list[int] = []
+    valid = batched(world.is_valid, lambda qs: (sizes.append(len(qs)), world.valid_batch(qs))[1])
+    space = JointSpace(world.lower, world.upper, valid, resolution=0.01)
+    rng = np.random.default_rng(3)
+    verdicts = set()
+    for _ in range(60):
+        a, b = rng.uniform(-2.5, 2.5, (2, 2))
+        if not (world.is_valid(a) and world.is_valid(b)):
+            continue
+        cost = checks["cost"]
+        ceiling = max(cost(a), cost(b))
+        line = densify(np.stack([a, b]), 0.01)[1:-1]
+        expected = bool(np.all(world.valid_batch(line)) and np.max(cost.batch(line), initial=0.0) <= ceiling)
+        sizes.clear()
+        got = TRRTPlanner._direct_ok(_Checks(space, valid, cost), a, b, ceiling)
+        assert got == expected
+        verdicts.add((got, bool(np.all(world.valid_batch(line)))))
+        if not np.all(world.valid_batch(line[::8])):
+            assert sizes == [len(line[::8])]  # blocked at a coarse state: one small call
+    assert verdicts == {(True, True), (False, True), (False, False)}  # free, over the ceiling, blocked
