@@ -687,6 +687,9 @@ def _realise(
         robot.attach(arm, None)
         held = None
         T_part = slot_place.T_world_part
+        # the opened fingers back off past the part they let go of, now an obstacle where it was placed
+        extra = (Obstacle(part.name, part.mesh, T_part),)
+        _set_world(robot, world, *extra)
         back = _line(robot, chk, arm, last[-1],
                      approach_offset(robot.fk(arm, last[-1]), settings.pregrasp_distance), settings,
                      (pick, nodes[i + 1]), f"retreat at {place[0]}", node=place)

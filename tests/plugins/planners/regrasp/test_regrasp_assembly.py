@@ -282,3 +282,29 @@ def test_keyframe_sequences_failing_at_a_straight_line_never_reach_the_motion_pl
         assert motion.calls == len(free)
     finally:
         robot.close()
+
+
+@pytest.mark.slow
+def test_the_opened_hand_retreats_clear_of_the_part_it_let_go_of() -> None:
+    """Ring on post, seed 36: the right hand's opened finger, backing off from the post base it has just put down,
+    went 0.6 mm into it (the re-check found it); the retreat is checked with the part placed as an obstacle."""
+    from asmteach.core import registry
+    from asmteach.core.interfaces import AssemblyProblem
+    from asmteach.core.models import TablePlane
+    from asmteach.core.scene import SceneSettings, random_start_poses
+
+    task = load_structure("configs/parts/set2/ring_on_post.yaml")
+    a, b = build_part(task.part_a), build_part(task.part_b)
+    robot = registry.create("robots", "nextage_pybullet", {"ik": {"max_starts": 4}}, seed=36)
+    try:
+        grasps = registry.create("grasp_planners", "antipodal", {}, seed=36)
+        motion = registry.create("motion_planners", "trrt", {}, seed=36)
+        T_a, T_b = random_start_poses([a, b], 0.0, SceneSettings(), np.random.default_rng([36, 11]))
+        problem = AssemblyProblem(a, b, task, T_a, T_b, grasps.plan(a, robot.hand), grasps.plan(b, robot.hand),
+                                  TablePlane(height=0.0))
+        res = registry.create("assembly_planners", "regrasp", {}, seed=36).plan(problem, robot, motion)
+        assert res.success, res.reason
+        chk = robot.verify_plan(res.plan, {a.name: (a, T_a), b.name: (b, T_b)}, problem.table, resolution=0.005)
+        assert chk.ok, chk.summary()
+    finally:
+        robot.close()
