@@ -60,6 +60,7 @@ from scipy.spatial import cKDTree
 
 from asmteach.core.interfaces import MotionPlanner, MotionResult
 from asmteach.plugins.planners.motion.batch import Batched
+from asmteach.plugins.planners.motion.interpolate import densify
 from asmteach.plugins.planners.motion.query import (
     FailureKind,
     MotionSettings,
@@ -207,12 +208,6 @@ class _Transition:
         return False
 
 
-def _between(qa: np.ndarray, qb: np.ndarray, resolution: float) -> np.ndarray:
-    """The states strictly between ``qa`` and ``qb`` at ``resolution`` radians (Euclidean joint-space norm)."""
-    k = max(1, math.ceil(float(np.linalg.norm(qb - qa)) / resolution))
-    return qa + (np.arange(1, k) / k)[:, None] * (qb - qa)
-
-
 class _Checks:
     """State and motion validity and costs, batched when the callables offer ``batch``; counts the calls."""
 
@@ -242,7 +237,7 @@ class _Checks:
         """The straight segment ``qa -> qb`` (end points assumed valid) at the space's resolution."""
         if self.valid_batch is None:
             return self.space.check_motion(qa, qb)
-        return self.states(_between(qa, qb, self.space.resolution))
+        return self.states(densify(np.stack([qa, qb]), self.space.resolution)[1:-1])
 
     def states(self, qs: np.ndarray) -> bool:
         """Every one of ``qs`` ``(n, dof)`` valid, in one batched call (``valid_batch`` must exist)."""
@@ -417,7 +412,7 @@ class TRRTPlanner(MotionPlanner):
         def below(states: np.ndarray) -> bool:
             return checks.cost_fn is None or len(states) == 0 or bool(np.max(checks.costs(states)) <= ceiling)
 
-        line = _between(q_start, q_goal, checks.space.resolution)
+        line = densify(np.stack([q_start, q_goal]), checks.space.resolution)[1:-1]  # strictly between
         if checks.valid_batch is None:
             return checks.motion(q_start, q_goal) and below(line)
         first = np.zeros(len(line), dtype=bool)

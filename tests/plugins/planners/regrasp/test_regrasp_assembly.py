@@ -1,16 +1,38 @@
 """Assembly planning on the real Nextage model: goals, placement slots, a whole two-part plan."""
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 import numpy as np
 import pytest
 
-from asmteach.core import geometry
+from asmteach.core import geometry, registry
+from asmteach.core.interfaces import AssemblyProblem, Robot
+from asmteach.core.models import TablePlane
 from asmteach.core.parts import build_part, load_structure
+from asmteach.core.scene import SceneSettings, random_start_poses
 from asmteach.plugins.planners.motion.interpolate import densify
 from asmteach.plugins.planners.placements.planner import compute_placements
 from asmteach.plugins.planners.regrasp.assembly import AssemblySettings, placement_slots
 from asmteach.plugins.planners.regrasp.goals import choose_assembly_goal
 
 STRUCTURE = "configs/parts/set1/peg_in_hole.yaml"
+
+
+@contextmanager
+def random_scene(structure: str, seed: int) -> Iterator[tuple[Robot, AssemblyProblem]]:
+    """The Nextage and the assembly sweep's scene ``seed`` of ``structure`` (both parts at random start poses);
+    the robot is closed afterwards."""
+    task = load_structure(structure)
+    a, b = build_part(task.part_a), build_part(task.part_b)
+    robot = registry.create("robots", "nextage_pybullet", {"ik": {"max_starts": 4}}, seed=seed)
+    try:
+        grasps = registry.create("grasp_planners", "antipodal", {}, seed=seed)
+        T_a, T_b = random_start_poses([a, b], 0.0, SceneSettings(), np.random.default_rng([seed, 11]))
+        yield robot, AssemblyProblem(a, b, task, T_a, T_b, grasps.plan(a, robot.hand), grasps.plan(b, robot.hand),
+                                     TablePlane(height=0.0))
+    finally:
+        robot.close()
 
 
 @pytest.fixture(scope="module")
@@ -152,10 +174,6 @@ def test_peg_in_hole_plan_is_collision_free_and_ends_assembled(peg_in_hole_plan)
 @pytest.mark.slow
 def test_plan_insertion_aims_b_at_an_a_seen_off_its_goal(peg_in_hole_plan) -> None:
     """A seen 1 mm and 1 deg off its planned goal: B's segments alone, from where the arms are, into that A."""
-    from asmteach.core import registry
-    from asmteach.core.interfaces import AssemblyProblem
-    from asmteach.core.models import TablePlane
-
     p = peg_in_hole_plan
     robot, task = p.robot, p.task
     T_seen = geometry.compose(geometry.from_rpy(0, 0, 0, t=[0.001, 0.0, 0.0]), p.result.T_world_a_goal,
@@ -208,21 +226,11 @@ def test_goals_are_ranked_by_how_vertical_they_make_the_insertion() -> None:
 def test_a_slider_whose_upright_goal_leaves_one_grasp_is_assembled_with_a_lying_flat() -> None:
     """Stood on its end, the T-slot leaves only 19 mm of the slider's rib outside it, beside its face, and the
     Nextage reaches one grasp of it there: the planner puts A down flat and slides B in sideways."""
-    from asmteach.core import registry
-    from asmteach.core.interfaces import AssemblyProblem
-    from asmteach.core.models import TablePlane
-    from asmteach.core.scene import SceneSettings, random_start_poses
     from asmteach.plugins.planners.regrasp.plan_io import table_obstacle
 
-    task = load_structure("configs/parts/set1/t_slot.yaml")
-    a, b = build_part(task.part_a), build_part(task.part_b)
-    robot = registry.create("robots", "nextage_pybullet", {"ik": {"max_starts": 4}}, seed=0)
-    try:
-        grasps = registry.create("grasp_planners", "antipodal", {}, seed=0)
+    with random_scene("configs/parts/set1/t_slot.yaml", 0) as (robot, problem):
+        task = problem.task
         motion = registry.create("motion_planners", "trrt", {}, seed=0)
-        T_a, T_b = random_start_poses([a, b], 0.0, SceneSettings(), np.random.default_rng([0, 11]))
-        problem = AssemblyProblem(a, b, task, T_a, T_b, grasps.plan(a, robot.hand), grasps.plan(b, robot.hand),
-                                  TablePlane(height=0.0))
         upright = registry.create("assembly_planners", "regrasp", {"min_goal_grasps": 0}, seed=0)
         chosen = upright._choose_goal(problem, robot, table_obstacle(robot, 0.0), None)[0]
         np.testing.assert_array_equal(chosen.v_world, [0.0, 0.0, -1.0])  # unchecked: the most vertical
@@ -234,9 +242,6 @@ def test_a_slider_whose_upright_goal_leaves_one_grasp_is_assembled_with_a_lying_
         assert res.details["goal_grasps_b"] >= 3
         assert any("goal placement" in m and "grasps of t_slider" in m for m in messages)
         np.testing.assert_allclose(res.T_world_b_goal, res.T_world_a_goal @ task.T_A_B, atol=1e-12)
-    finally:
-        robot.close()
-
 
 class _CountingPlanner:
     """A motion planner that counts its queries and passes them on."""
@@ -257,20 +262,8 @@ def test_keyframe_sequences_failing_at_a_straight_line_never_reach_the_motion_pl
     """Notched block, seed 0: eight of B's keyframe sequences end in an insertion whose fingers meet A, and
     one of each part's carries ends in collision. Lines and ends are checked before any free motion is
     planned, so the motion planner sees only the free motions of the plan that succeeds."""
-    from asmteach.core import registry
-    from asmteach.core.interfaces import AssemblyProblem
-    from asmteach.core.models import TablePlane
-    from asmteach.core.scene import SceneSettings, random_start_poses
-
-    task = load_structure("configs/parts/set1/notched_block.yaml")
-    a, b = build_part(task.part_a), build_part(task.part_b)
-    robot = registry.create("robots", "nextage_pybullet", {"ik": {"max_starts": 4}}, seed=0)
-    try:
-        grasps = registry.create("grasp_planners", "antipodal", {}, seed=0)
+    with random_scene("configs/parts/set1/notched_block.yaml", 0) as (robot, problem):
         motion = _CountingPlanner(registry.create("motion_planners", "trrt", {}, seed=0))
-        T_a, T_b = random_start_poses([a, b], 0.0, SceneSettings(), np.random.default_rng([0, 11]))
-        problem = AssemblyProblem(a, b, task, T_a, T_b, grasps.plan(a, robot.hand), grasps.plan(b, robot.hand),
-                                  TablePlane(height=0.0))
         messages: list[str] = []
         res = registry.create("assembly_planners", "regrasp", {}, seed=0).plan(problem, robot, motion,
                                                                               progress=messages.append)
@@ -280,31 +273,16 @@ def test_keyframe_sequences_failing_at_a_straight_line_never_reach_the_motion_pl
         free = [s for s in res.plan.segments if s.trajectory is not None
                 and (s.label.startswith(("move to pre-grasp", "carry")) or s.label.endswith("home"))]
         assert motion.calls == len(free)
-    finally:
-        robot.close()
-
 
 @pytest.mark.slow
 def test_the_opened_hand_retreats_clear_of_the_part_it_let_go_of() -> None:
     """Ring on post, seed 36: the right hand's opened finger, backing off from the post base it has just put down,
     went 0.6 mm into it (the re-check found it); the retreat is checked with the part placed as an obstacle."""
-    from asmteach.core import registry
-    from asmteach.core.interfaces import AssemblyProblem
-    from asmteach.core.models import TablePlane
-    from asmteach.core.scene import SceneSettings, random_start_poses
-
-    task = load_structure("configs/parts/set2/ring_on_post.yaml")
-    a, b = build_part(task.part_a), build_part(task.part_b)
-    robot = registry.create("robots", "nextage_pybullet", {"ik": {"max_starts": 4}}, seed=36)
-    try:
-        grasps = registry.create("grasp_planners", "antipodal", {}, seed=36)
+    with random_scene("configs/parts/set2/ring_on_post.yaml", 36) as (robot, problem):
         motion = registry.create("motion_planners", "trrt", {}, seed=36)
-        T_a, T_b = random_start_poses([a, b], 0.0, SceneSettings(), np.random.default_rng([36, 11]))
-        problem = AssemblyProblem(a, b, task, T_a, T_b, grasps.plan(a, robot.hand), grasps.plan(b, robot.hand),
-                                  TablePlane(height=0.0))
         res = registry.create("assembly_planners", "regrasp", {}, seed=36).plan(problem, robot, motion)
         assert res.success, res.reason
-        chk = robot.verify_plan(res.plan, {a.name: (a, T_a), b.name: (b, T_b)}, problem.table, resolution=0.005)
+        a, b = problem.part_a, problem.part_b
+        chk = robot.verify_plan(res.plan, {a.name: (a, problem.T_world_a), b.name: (b, problem.T_world_b)},
+                                problem.table, resolution=0.005)
         assert chk.ok, chk.summary()
-    finally:
-        robot.close()
