@@ -1,12 +1,26 @@
 """Convex hull of a part and its support facets (clusters of coplanar hull faces).
 
 A part resting on a table touches it with a face of its convex hull. Hull
-triangles that lie in one plane (a box face is two triangles; a noisy scan has
-many nearly coplanar ones) form one *support facet*. Clustering uses the
-angle between face normals: adjacent faces whose normals differ by less than
-``angle_tol`` are joined, and a cluster whose normals spread more than
-``angle_tol`` from their mean (a finely tessellated curve chaining up) is
-split again by region growing from its largest face.
+triangles that lie in one plane (a box face is two triangles; a CAD export
+rounded to float32 or a slightly uneven face gives many nearly coplanar ones,
+with zero-area slivers among them) form one *support facet*. The merge rule
+has two stated tolerances:
+
+* angular: adjacent faces whose normals differ by less than ``angle_tol``
+  (default 1 degree) are joined;
+* distance: adjacent faces are joined when the vertices of one lie within
+  ``merge_dist`` of the other's plane (default ``MERGE_DIST_REL = 1e-4`` of
+  the hull's largest extent). This is what keeps a flat face whole when qhull
+  leaves slivers on it: a sliver's normal can point anywhere, its vertices
+  lie on the face.
+
+A cluster must stay flat: a face neither within ``angle_tol`` of the
+cluster's mean normal nor within ``merge_dist`` of its support plane (a
+finely tessellated curve chaining up) makes the cluster split again by
+region growing from its largest face, with the same two tests against that
+face. A facet is then treated as flat: its support polygon is its boundary
+projected on the plane of its (area-weighted) mean normal, and the part
+rests on that plane (its vertices lie within the tolerances of it).
 
 The hull comes straight from qhull (:class:`scipy.spatial.ConvexHull`): its
 facet planes give exact outward normals (the triangles of one qhull facet
@@ -28,7 +42,12 @@ from scipy.spatial import ConvexHull, QhullError
 
 from asmteach.core.errors import UserError
 
-__all__ = ["Hull", "SupportFacets", "convex_hull", "cross", "is_closed", "support_facets"]
+__all__ = ["MERGE_DIST_REL", "Hull", "SupportFacets", "convex_hull", "cross", "is_closed", "support_facets"]
+
+# Default distance tolerance of the facet merge, as a fraction of the hull's largest extent: faces whose
+# vertices lie within it of a facet's plane are that facet (0.02 mm on a 200 mm part: far below what a
+# table or a gripper can tell apart, far above the float32 rounding of an STL).
+MERGE_DIST_REL = 1e-4
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -239,21 +258,35 @@ def _components(n: int, a: np.ndarray, b: np.ndarray) -> tuple[int, np.ndarray]:
     return len(uniq), labels
 
 
-def _cluster_faces(hull: Hull, angle_tol: float) -> np.ndarray:
-    """Facet label of each hull face (see the module docstring)."""
+def _cluster_faces(hull: Hull, angle_tol: float, merge_dist: float) -> np.ndarray:
+    """Facet label of each hull face (see the module docstring).
+
+    Two adjacent faces are *close* when their normals differ by less than
+    ``angle_tol`` or when the vertices of one lie within ``merge_dist`` of the
+    other's plane (a sliver's normal means nothing, its vertices do). The
+    connected components of close faces are the facets, unless a component
+    strays from its own plane (a face neither within ``angle_tol`` of its
+    mean normal nor within ``merge_dist`` of its support plane: a curve
+    chaining up); such a component is split by region growing from its
+    largest face with the same two tests against that face.
+    """
     normals, areas = hull.normals, hull.areas
     n_faces = len(normals)
+    tri = hull.vertices[hull.faces]
+    plane_off = np.einsum("ij,ij->i", normals, tri[:, 0])
     # Each undirected edge once: from the face with the smaller index.
     f = np.repeat(np.arange(n_faces), 3)
     g = hull.neighbors.reshape(-1)
     once = f < g
     f, g = f[once], g[once]
     cos_tol = np.cos(angle_tol)
-    close = np.einsum("ij,ij->i", normals[f], normals[g]) > cos_tol
+    g_off_f = np.abs(np.einsum("fkj,fj->fk", tri[g], normals[f]) - plane_off[f][:, None]).max(axis=1)
+    f_off_g = np.abs(np.einsum("fkj,fj->fk", tri[f], normals[g]) - plane_off[g][:, None]).max(axis=1)
+    close = (np.einsum("ij,ij->i", normals[f], normals[g]) > cos_tol) | (np.minimum(g_off_f, f_off_g) <= merge_dist)
     n_comp, labels = _components(n_faces, f[close], g[close])
     if n_comp == n_faces:
         return labels
-    # A component must stay within angle_tol of its mean normal; else split it by region growing.
+    # A component must stay near its mean plane; else split it by region growing.
     mean = np.zeros((n_comp, 3))
     np.add.at(mean, labels, normals * areas[:, None])
     # A component of zero-area slivers only has no area-weighted mean: use its plain mean.
@@ -261,7 +294,11 @@ def _cluster_faces(hull: Hull, angle_tol: float) -> np.ndarray:
     if empty.any():
         np.add.at(mean, labels, np.where(empty[labels][:, None], normals, 0.0))
     mean /= np.linalg.norm(mean, axis=1, keepdims=True)
-    bad = np.unique(labels[np.einsum("ij,ij->i", normals, mean[labels]) < cos_tol])
+    proj = np.einsum("fkj,fj->fk", tri, mean[labels])
+    top = np.full(n_comp, -np.inf)
+    np.maximum.at(top, labels, proj.max(axis=1))
+    off_plane = (top[labels] - proj.min(axis=1)) > merge_dist
+    bad = np.unique(labels[(np.einsum("ij,ij->i", normals, mean[labels]) < cos_tol) & off_plane])
     if len(bad) == 0:
         return labels
     neighbors: list[list[int]] = [[] for _ in range(n_faces)]
@@ -275,14 +312,17 @@ def _cluster_faces(hull: Hull, angle_tol: float) -> np.ndarray:
         for seed in members[np.argsort(-areas[members], kind="stable")]:
             if seed not in unassigned:
                 continue
-            seed_n = normals[seed]
+            seed_n, seed_off = normals[seed], plane_off[seed]
             stack = [int(seed)]
             unassigned.discard(int(seed))
             while stack:
                 face = stack.pop()
                 labels[face] = next_label
                 for other in neighbors[face]:
-                    if other in unassigned and normals[other] @ seed_n >= cos_tol:
+                    if other in unassigned and (
+                        normals[other] @ seed_n >= cos_tol
+                        or float(np.abs(tri[other] @ seed_n - seed_off).max()) <= merge_dist
+                    ):
                         unassigned.discard(other)
                         stack.append(other)
             next_label += 1
@@ -290,18 +330,25 @@ def _cluster_faces(hull: Hull, angle_tol: float) -> np.ndarray:
     return labels
 
 
-def support_facets(hull: Hull, *, angle_tol: float = np.radians(1.0)) -> SupportFacets:
+def support_facets(
+    hull: Hull, *, angle_tol: float = np.radians(1.0), merge_dist: float | None = None
+) -> SupportFacets:
     """Cluster the faces of a convex ``hull`` into support facets.
 
     Parameters
     ----------
     hull : convex hull in the part frame (metres), from :func:`convex_hull`.
     angle_tol : radians; faces within this angle of each other (and of the
-        facet's mean normal) are one facet.
+        facet's seed or mean normal) are one facet.
+    merge_dist : metres; a face whose vertices lie within this distance of an adjacent face's plane
+        (and of the facet's plane) joins it whatever its normal. Default: ``MERGE_DIST_REL`` times the
+        hull's largest extent.
     """
     vertices, faces, face_normals, areas_f = hull.vertices, hull.faces, hull.normals, hull.areas
     triangles = vertices[faces]
-    labels = _cluster_faces(hull, angle_tol)
+    if merge_dist is None:
+        merge_dist = MERGE_DIST_REL * float(np.ptp(vertices, axis=0).max())
+    labels = _cluster_faces(hull, angle_tol, merge_dist)
     n_clusters = int(labels.max()) + 1
     normals = np.zeros((n_clusters, 3))
     np.add.at(normals, labels, face_normals * areas_f[:, None])

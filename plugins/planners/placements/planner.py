@@ -1,10 +1,18 @@
 """Stable placements of a part: :func:`compute_placements`.
 
 Pipeline (paper, section "Noise correction using geometric constraints"):
-convex hull -> support facets (coplanar hull faces) -> stability test with a
-margin -> one :class:`~asmteach.core.models.Placement` per stable facet, with
-its rotation (facet on the table, canonical yaw), support polygon, landing
-probability and rotational symmetry about the table normal.
+convex hull -> support facets (hull faces merged within an angular and a
+distance tolerance, :mod:`.facets`) -> stability test with a margin, rolling
+edges of curved sides left out (:mod:`.stability`) -> one
+:class:`~asmteach.core.models.Placement` per stable facet, with its rotation
+(facet on the table, canonical yaw), support polygon, landing probability and
+rotational symmetry about the table normal. A merged facet is flat within the
+tolerances, so the part rests on the plane of its mean normal. The rule is
+checked against PyBullet drops by :mod:`.drop_test` (and over the part corpus
+by ``benchmarks/placements_drop.py``).
+
+A facet with nothing to topple over (every edge a rolling edge: a sphere, a
+belly with no edge in reach) is reported with margin :data:`NO_TOPPLE_MARGIN`.
 
 Frames: ``T_table_part`` maps part-frame points (metres) into the table frame
 (z up, table surface z = 0). Canonical yaw: the rotation has fixed-axis yaw 0
@@ -29,16 +37,19 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Placement
 from asmteach.core.parts import mesh_hash
-from asmteach.plugins.planners.placements.facets import Hull, SupportFacets, convex_hull, is_closed, support_facets
-from asmteach.plugins.planners.placements.stability import (
-    DirectionStability,
-    FacetStability,
-    evaluate_direction,
-    facet_stability,
+from asmteach.plugins.planners.placements.facets import (
+    MERGE_DIST_REL,
+    Hull,
+    SupportFacets,
+    convex_hull,
+    is_closed,
+    support_facets,
 )
+from asmteach.plugins.planners.placements.stability import FacetStability, facet_stability
 from asmteach.plugins.planners.placements.symmetry import SymmetryFinder, symmetry_yaws
 
 __all__ = [
+    "NO_TOPPLE_MARGIN",
     "PlacementResult",
     "RejectedFacet",
     "canonical_rotation",
@@ -50,7 +61,8 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 _CACHE_SIZE = 64
-_MAX_FACE_TRIALS = 200
+# Reported margin of a facet with nothing to topple over (every edge a rolling edge: see stability).
+NO_TOPPLE_MARGIN = 100.0
 _cache: OrderedDict[tuple[Any, ...], PlacementResult] = OrderedDict()
 _warned: set[str] = set()
 
@@ -131,40 +143,14 @@ def _axis_order(finder: SymmetryFinder | None, normal: np.ndarray, memo: dict[tu
     return memo[key]
 
 
-def _exact_support(
-    facets: SupportFacets, stab: FacetStability, c: int, com: np.ndarray, min_margin: float, tol: float
-) -> tuple[np.ndarray, float, np.ndarray] | None:
-    """Resting normal, margin and contact points (part frame) of facet ``c``; None when none holds the part.
-
-    A facet of exactly coplanar faces (depth within ``tol`` metres) rests on
-    its own plane: its margin is the one :func:`facet_stability` measured and
-    its contacts are its boundary vertices. A facet of nearly coplanar faces
-    (a scan) touches its mean plane at fewer than three vertices; the part then
-    rocks onto one of its hull faces, so the face planes are tried (largest
-    first) with the independent test and the one with the best margin is kept.
-    """
-    if facets.depth[c] <= tol:
-        return facets.normals[c], float(stab.margin[c]), facets.vertices[facets.edges[facets.edge_cluster == c, 0]]
-    hv = facets.vertices
-    candidates = [facets.normals[c]]
-    faces = np.flatnonzero(facets.face_cluster == c)
-    faces = faces[np.argsort(-facets.face_areas[faces], kind="stable")][:_MAX_FACE_TRIALS]
-    best: DirectionStability | None = None
-    for k, n in enumerate([*candidates, *facets.face_normals[faces]]):
-        ev = evaluate_direction(hv, com, n, tol=tol)
-        if k == 0 and ev.margin >= min_margin:
-            return ev.normal, ev.margin, ev.contacts
-        if ev.margin >= min_margin and (best is None or ev.margin > best.margin):
-            best = ev
-    return None if best is None else (best.normal, best.margin, best.contacts)
-
-
 def plan_placements(
     mesh: trimesh.Trimesh,
     center_of_mass: np.ndarray | None = None,
     *,
     min_margin: float = 0.1,
     angle_tol_deg: float = 1.0,
+    merge_dist_rel: float = MERGE_DIST_REL,
+    roll_angle_deg: float = 15.0,
     min_probability: float = 0.0,
     symmetry: bool = True,
     max_symmetry_order: int = 36,
@@ -178,6 +164,10 @@ def plan_placements(
     center_of_mass : ``(3,)`` part frame, metres; default: the mesh's (or its hull's, if open).
     min_margin : smallest ``d / h`` of a stable placement (dimensionless).
     angle_tol_deg : faces whose normals differ by less are one support facet.
+    merge_dist_rel : faces whose vertices lie within this fraction of the part's largest extent of an
+        adjacent face's plane are one support facet (see :mod:`.facets`).
+    roll_angle_deg : largest dihedral angle of a rolling edge, degrees (see :mod:`.stability`); 0 turns
+        rolling rests off.
     min_probability : placements less likely than this are dropped (0 keeps every stable one).
     symmetry : find each placement's rotational symmetry about the table normal.
     name : how messages refer to the part.
@@ -206,10 +196,10 @@ def plan_placements(
             f"{name}: the centre of mass {np.round(com, 6).tolist()} m lies outside the convex hull "
             f"(by {outside * 1000:.3f} mm); give it in the part frame, in metres"
         )
-    # Contact tolerance of the independent test (evaluate_direction's default).
-    tol = 1e-6 * float(np.ptp(hv, axis=0).max())
-    facets = support_facets(hull, angle_tol=np.radians(angle_tol_deg))
-    stab = facet_stability(facets, com, min_margin=min_margin)
+    facets = support_facets(
+        hull, angle_tol=np.radians(angle_tol_deg), merge_dist=merge_dist_rel * float(np.ptp(hv, axis=0).max())
+    )
+    stab = facet_stability(facets, com, min_margin=min_margin, roll_angle=np.radians(roll_angle_deg))
 
     keep = np.flatnonzero(stab.stable & (stab.probability >= min_probability))
     keep = keep[np.lexsort((-stab.margin[keep], -stab.probability[keep]))]
@@ -217,20 +207,12 @@ def plan_placements(
     placements: list[Placement] = []
     kept: list[int] = []
     orders: dict[tuple[float, ...], int] = {}
-    refused: list[RejectedFacet] = []
     for c in keep:
-        exact = _exact_support(facets, stab, int(c), com, min_margin, tol)
-        if exact is None:
-            refused.append(
-                RejectedFacet(
-                    normal=facets.normals[c].round(6).tolist(),
-                    margin=float(stab.margin[c]),
-                    probability=float(stab.probability[c]),
-                    reason="near-coplanar facet: no single hull face of it holds the COM with the margin",
-                )
-            )
-            continue
-        normal, margin, contacts = exact
+        # A merged facet is flat within the tolerances: the part rests on the plane of its mean normal,
+        # on the facet's boundary vertices.
+        normal = facets.normals[c]
+        margin = float(min(stab.margin[c], NO_TOPPLE_MARGIN))
+        contacts = facets.vertices[facets.edges[facets.edge_cluster == c, 0]]
         R = canonical_rotation(normal)
         pts = hv @ R.T
         t = np.array([-(R @ com)[0], -(R @ com)[1], -pts[:, 2].min()])
@@ -262,7 +244,7 @@ def plan_placements(
             ),
         )
         for c in np.flatnonzero(stab.holds & ~np.isin(np.arange(facets.count), keep))
-    ] + refused
+    ]
     if not placements:
         notes.append("no facet passes the stability test")
     return PlacementResult(

@@ -4,7 +4,29 @@ Stability test (the authors' own rule): a facet is a stable placement when the
 centre of mass (COM), projected along the facet normal onto the support plane,
 lies inside the support polygon with ``d / h >= min_margin``, where ``d`` is
 the distance from the projection to the nearest polygon edge and ``h`` the
-height of the COM above the plane (default ``min_margin = 0.1``).
+height of the COM above the plane (default ``min_margin = 0.1``). Facets are
+the merged hull faces of :mod:`.facets` (angular and distance tolerances).
+
+Curved parts (rolling edges). A tessellated curve gives hull facets that are
+thin strips (a 64-gon cylinder on its side: ``d / h = tan(pi / 64) = 0.05``
+across the strip) or small patches (a duck's belly). Tipping such a part over
+a strip's long edge does not topple it: it rolls onto the next strip of the
+same curve and stays there (a cylinder: neutral) or rolls back (a belly:
+the COM rises). So an edge is a *rolling edge* when the facet across it is
+within ``roll_angle`` (default 15 degrees) of this one and either topples
+back onto this facet or holds the COM with ``d / h >= min_margin`` against
+its own steep edges (dihedral of ``roll_angle`` or more: the ones it could
+topple over; a strip next to a D-peg's flat is not such a facet, so its
+neighbours are measured against the edge onto it); ``d`` is measured to the other
+edges only, the ones the part can topple over (the cylinder's end caps).
+A facet that holds the COM with every edge a rolling edge has nothing to
+topple over: its ``distance`` is infinite. Why 15 degrees: a regular
+``n``-gon prism has ``d / h = tan(pi / n)`` on its sides, below 0.1 exactly
+when ``n > 31``, i.e. when its dihedral angles ``2 pi / n`` are below
+11.6 degrees; from 12 sides (30 degrees) up the sides pass on ``d / h`` alone.
+A tall post standing on its end (edges of 90 degrees) is refused as before.
+PyBullet drops (:mod:`.drop_test`) settle a cylinder on a strip, a duck on
+its belly: the rests this rule reports.
 
 Probability: a part dropped in a uniformly random orientation first lands on
 the facet whose solid angle (seen from the COM) contains the down direction;
@@ -33,8 +55,10 @@ class FacetStability:
     """Per-facet stability figures (arrays of length ``C``, the facet count).
 
     ``height``: COM height above the support plane (m); ``distance``: signed distance
-    (m) from the projected COM to the nearest edge line, positive inside;
-    ``margin``: ``distance / height``; ``stable``: ``margin >= min_margin``;
+    (m) from the projected COM to the nearest edge line the part can topple over
+    (rolling edges left out: see the module docstring), positive inside, ``inf``
+    when every edge is a rolling edge; ``margin``: ``distance / height``;
+    ``stable``: ``margin >= min_margin``; ``rolls``: the facet has rolling edges;
     ``holds``: the COM projection is inside (a sink of the toppling graph);
     ``topple_to``: facet reached by toppling (itself for sinks);
     ``solid_angle``: steradians seen from the COM; ``probability``: of ending on each facet.
@@ -44,6 +68,7 @@ class FacetStability:
     distance: np.ndarray
     margin: np.ndarray
     stable: np.ndarray
+    rolls: np.ndarray
     holds: np.ndarray
     topple_to: np.ndarray
     solid_angle: np.ndarray
@@ -77,8 +102,13 @@ def _first_per_group(groups: np.ndarray, key: np.ndarray, n_groups: int) -> np.n
     return out
 
 
-def facet_stability(facets: SupportFacets, com: np.ndarray, *, min_margin: float = 0.1) -> FacetStability:
-    """Stability and landing probability of every facet for a COM (part frame, metres)."""
+def facet_stability(
+    facets: SupportFacets, com: np.ndarray, *, min_margin: float = 0.1, roll_angle: float = np.radians(15.0)
+) -> FacetStability:
+    """Stability and landing probability of every facet for a COM (part frame, metres).
+
+    ``roll_angle`` (radians): largest dihedral of a rolling edge; 0 measures ``d`` to every edge.
+    """
     com = np.asarray(com, dtype=float)
     n_c = facets.count
     height = facets.offsets - facets.normals @ com
@@ -96,8 +126,6 @@ def facet_stability(facets: SupportFacets, com: np.ndarray, *, min_margin: float
     distance = np.full(n_c, np.inf)
     np.minimum.at(distance, facets.edge_cluster, s)
     holds = distance >= 0.0
-    margin = distance / np.maximum(height, 1e-12)
-    stable = margin >= min_margin
 
     # Toppling edge of a non-holding facet: the edge crossed by the ray from the facet
     # centroid to the COM projection (the projection lies in the wedge centroid-a-b).
@@ -123,6 +151,21 @@ def facet_stability(facets: SupportFacets, com: np.ndarray, *, min_margin: float
     stuck = final[final] != final  # numerical ties that form a cycle: stop where they are
     final[stuck] = np.flatnonzero(stuck)
 
+    # Rolling edges of holding facets: onto a facet within roll_angle that topples back, or that holds
+    # and passes the rule against its own steep edges (the ones it could topple over).
+    own, nb = facets.edge_cluster, facets.edge_neighbor
+    shallow = np.einsum("ij,ij->i", facets.normals[own], facets.normals[nb]) > np.cos(roll_angle)
+    safe_h = np.maximum(height, 1e-12)
+    steep_d = np.full(n_c, np.inf)
+    np.minimum.at(steep_d, own[~shallow], s[~shallow])
+    firm = holds & (steep_d / safe_h >= min_margin)
+    rolling = holds[own] & shallow & ((final[nb] == own) | firm[nb])
+    distance = np.where(holds, np.inf, distance)
+    np.minimum.at(distance, own[~rolling & holds[own]], s[~rolling & holds[own]])
+    rolls = np.bincount(own[rolling], minlength=n_c) > 0
+    margin = distance / safe_h
+    stable = margin >= min_margin
+
     solid_f = _solid_angles(facets.vertices[facets.faces], com)
     solid = np.bincount(facets.face_cluster, weights=solid_f, minlength=n_c)
     prob = np.bincount(final, weights=solid, minlength=n_c) / max(solid.sum(), 1e-300)
@@ -131,6 +174,7 @@ def facet_stability(facets: SupportFacets, com: np.ndarray, *, min_margin: float
         distance=distance,
         margin=margin,
         stable=stable,
+        rolls=rolls,
         holds=holds,
         topple_to=final,
         solid_angle=solid,

@@ -1,0 +1,331 @@
+"""Independent check of stable placements: drop the part onto a plane in PyBullet and see where it settles.
+
+Two experiments on one part, both in a headless PyBullet world (z up, plane z = 0):
+
+* **drops**: the part is released from ``drops`` seeded random orientations
+  (uniform on SO(3)), its lowest point ``drop_height`` above the plane, and
+  simulated until it comes to rest; the settled orientations are *rests*;
+* **releases**: each reported placement is set on the plane, tilted by a
+  small seeded perturbation (``perturb_deg`` about a random horizontal axis),
+  released and simulated; it *stays put* when it settles back in the same
+  placement.
+
+Collision shape: the convex hull of the mesh. Only the hull can touch a
+plane (any point of the part that touches the plane is a point of the hull
+on its supporting plane), so resting on a plane is the same for the part and
+for its hull; the mass properties are the part's own (its COM and inertia,
+uniform density).
+
+Orientations are compared *up to a rotation about the vertical axis*: two
+orientations differ only by a yaw exactly when they put the same part-frame
+direction down, so the geodesic distance between the classes is the angle
+between the down directions ``R^T (0, 0, -1)`` (part frame). Rests closer
+than ``match_deg`` are one cluster (single linkage); a cluster matches the
+nearest reported placement when that is within ``match_deg`` too.
+
+Units: the part is scaled so its largest hull extent is at least ``size``
+metres and its smallest width at least ``min_width`` before the simulation.
+Resting is scale invariant (gravity and the margins ``d / h`` are), and a
+large body keeps Bullet's collision margin and time step small against the
+part.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pybullet as pb
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from asmteach.plugins.planners.placements.facets import convex_hull, is_closed
+
+__all__ = ["DropReport", "down_normal", "drop_test"]
+
+_DOWN = np.array([0.0, 0.0, -1.0])
+
+
+def down_normal(T_table_part: np.ndarray) -> np.ndarray:
+    """Part-frame unit direction that points down (``-z`` of the table) at ``T_table_part``."""
+    return np.asarray(T_table_part, dtype=float)[:3, :3].T @ _DOWN
+
+
+@dataclass
+class DropReport:
+    """Where a part settled, against the reported placements (all normals part frame, unit).
+
+    ``placement_normals``: down direction of each reported placement; ``rests``: ``(k, 3)`` down
+    direction of each cluster of settled drops, with ``rest_counts`` drops each and ``rest_match`` the
+    index of the matching placement (-1: *missed*; -2: *below margin*, a facet the planner refused on
+    purpose because it holds the part with ``d / h`` below the margin). Per placement: ``stays``, the
+    perturbed release settled back in it; ``rolled``, it settled in another reported placement at the
+    same COM height (within 5 %) instead (a part on a curved side rolls: neutral); neither: *spurious*;
+    ``release_error_deg``, where it settled, degrees from the placement. ``unsettled``: drops still
+    moving after the time allowed (twice ``max_seconds``, the second half heavily damped).
+    """
+
+    placement_normals: np.ndarray
+    rests: np.ndarray
+    rest_counts: np.ndarray
+    rest_match: np.ndarray
+    stays: np.ndarray
+    rolled: np.ndarray
+    release_error_deg: np.ndarray
+    unsettled: int
+    drops: int
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def reported(self) -> int:
+        """Number of reported placements."""
+        return len(self.placement_normals)
+
+    @property
+    def found(self) -> int:
+        """Number of distinct rests the drops settled in."""
+        return len(self.rests)
+
+    @property
+    def matched(self) -> int:
+        """Rests that match a reported placement."""
+        return int(np.sum(self.rest_match >= 0))
+
+    @property
+    def missed(self) -> int:
+        """Rests that match no reported placement (nor a facet refused on purpose)."""
+        return int(np.sum(self.rest_match == -1))
+
+    @property
+    def below_margin(self) -> int:
+        """Rests on facets the planner refused on purpose (``d / h`` below its margin)."""
+        return int(np.sum(self.rest_match == -2))
+
+    @property
+    def spurious(self) -> int:
+        """Reported placements that left, released, for no reported placement (toppled)."""
+        return int(np.sum(~self.stays & ~self.rolled))
+
+    @property
+    def rolled_away(self) -> int:
+        """Reported placements that, released, rolled into another reported placement (curved sides)."""
+        return int(np.sum(self.rolled))
+
+    @property
+    def agrees(self) -> bool:
+        """No missed rest and no spurious placement."""
+        return self.missed == 0 and self.spurious == 0
+
+    def summary(self) -> str:
+        """One line: reported, found, matched, missed, spurious."""
+        return (
+            f"reported {self.reported}, rests {self.found} ({self.drops} drops, {self.unsettled} unsettled), "
+            f"matched {self.matched}, missed {self.missed}, below margin {self.below_margin}, "
+            f"spurious {self.spurious}, rolled {self.rolled_away}"
+        )
+
+
+class _World:
+    """A PyBullet DIRECT world with a plane and one part (its hull, its mass properties)."""
+
+    def __init__(self, hull_vertices: np.ndarray, com: np.ndarray, inertia: np.ndarray, *, friction: float,
+                 rolling_friction: float, time_step: float) -> None:
+        self.client = pb.connect(pb.DIRECT)
+        c = self.client
+        pb.setGravity(0.0, 0.0, -9.81, physicsClientId=c)
+        pb.setTimeStep(time_step, physicsClientId=c)
+        plane = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=c)
+        self.plane = pb.createMultiBody(0.0, plane, physicsClientId=c)
+        # Link frame = principal axes at the COM (``p_part = com + E p_link``): PyBullet reports and sets
+        # the pose of the inertial frame, which is then the link frame itself.
+        evals, evecs = np.linalg.eigh(inertia)
+        if np.linalg.det(evecs) < 0:
+            evecs[:, 2] = -evecs[:, 2]
+        self.E = evecs
+        self.local = (np.asarray(hull_vertices, dtype=float) - com) @ evecs
+        shape = pb.createCollisionShape(pb.GEOM_MESH, vertices=self.local.tolist(), physicsClientId=c)
+        self.body = pb.createMultiBody(1.0, shape, basePosition=[0.0, 0.0, 1.0], physicsClientId=c)
+        for b in (self.plane, self.body):
+            # No rolling friction by default: it holds a polygon on its edges, where no rest is.
+            pb.changeDynamics(b, -1, lateralFriction=friction, restitution=0.0, rollingFriction=rolling_friction,
+                              spinningFriction=0.0, physicsClientId=c)
+        pb.changeDynamics(self.body, -1, localInertiaDiagonal=np.maximum(evals, 1e-9).tolist(),
+                          linearDamping=0.04, angularDamping=0.3, physicsClientId=c)
+
+    def close(self) -> None:
+        pb.disconnect(self.client)
+
+    def settle(self, R: np.ndarray, clearance: float, *, max_steps: int, window: int, still_deg: float
+               ) -> tuple[np.ndarray, bool]:
+        """Release the part with rotation ``R`` (part frame -> world), lowest point ``clearance`` m up.
+
+        Returns the settled rotation (part frame -> world) and whether it came to rest: its
+        part-frame down direction moved less than ``still_deg`` over the last ``window`` steps.
+        Sliding or spinning about the vertical does not change where it rests, so only the down
+        direction is watched (Bullet leaves flat contacts creeping by tenths of a millimetre).
+        """
+        c = self.client
+        R = R @ self.E  # link frame -> world
+        z = -float(np.min(self.local @ R[2])) + clearance
+        pb.resetBasePositionAndOrientation(self.body, [0.0, 0.0, z], Rotation.from_matrix(R).as_quat().tolist(),
+                                           physicsClientId=c)
+        pb.resetBaseVelocity(self.body, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=c)
+        stride = max(1, window // 8)
+        cos_still = np.cos(np.radians(still_deg))
+
+        def run(steps: int, cos_still: float) -> bool:
+            history: list[np.ndarray] = []
+            for k in range(1, steps + 1):
+                pb.stepSimulation(physicsClientId=c)
+                if k % stride:
+                    continue
+                q = pb.getBasePositionAndOrientation(self.body, physicsClientId=c)[1]
+                history.append(Rotation.from_quat(q).as_matrix()[2])  # -(link-frame down direction)
+                if len(history) > 8 and min(float(h @ history[-9]) for h in history[-8:]) > cos_still:
+                    return True
+            return False
+
+        settled = run(max_steps, cos_still)
+        if not settled:
+            # Still rolling (a cylinder on its side: neutral on a plane, and Bullet's solver keeps it going):
+            # heavy damping turns the motion into a slow descent that stops in the nearest rest.
+            pb.changeDynamics(self.body, -1, linearDamping=0.9, angularDamping=0.9, physicsClientId=c)
+            # Damped, a part on a thin strip still trembles by a few hundredths of a degree per step.
+            settled = run(max_steps, np.cos(np.radians(3.0 * still_deg)))
+            pb.changeDynamics(self.body, -1, linearDamping=0.04, angularDamping=0.3, physicsClientId=c)
+        q = pb.getBasePositionAndOrientation(self.body, physicsClientId=c)[1]
+        return Rotation.from_quat(q).as_matrix() @ self.E.T, settled
+
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angles (degrees) between unit rows of ``a`` (``(n, 3)``) and unit rows of ``b`` (``(m, 3)``): ``(n, m)``."""
+    return np.degrees(np.arccos(np.clip(np.atleast_2d(a) @ np.atleast_2d(b).T, -1.0, 1.0)))
+
+
+def _cluster(normals: np.ndarray, tol_deg: float) -> np.ndarray:
+    """Single-linkage labels of unit ``normals`` joined when closer than ``tol_deg``."""
+    n = len(normals)
+    labels = np.arange(n)
+    if n == 0:
+        return labels
+    close = _angle_deg(normals, normals) < tol_deg
+    for i in range(n):  # a few hundred rests at most: plain label propagation
+        for j in np.flatnonzero(close[i]):
+            a, b = labels[i], labels[j]
+            if a != b:
+                labels[labels == max(a, b)] = min(a, b)
+    return np.unique(labels, return_inverse=True)[1]
+
+
+def drop_test(
+    mesh: trimesh.Trimesh,
+    placement_normals: np.ndarray,
+    center_of_mass: np.ndarray | None = None,
+    *,
+    refused_normals: np.ndarray | None = None,
+    drops: int = 30,
+    seed: int = 0,
+    perturb_deg: float = 1.0,
+    match_deg: float = 2.5,
+    drop_height: float = 0.02,
+    friction: float = 0.8,
+    rolling_friction: float = 0.0,
+    size: float = 1.0,
+    min_width: float = 0.5,
+    time_step: float = 1.0 / 240.0,
+    max_seconds: float = 8.0,
+) -> DropReport:
+    """Drop ``mesh`` and release it in each placement; compare where it settles with ``placement_normals``.
+
+    Parameters
+    ----------
+    mesh : the part, part frame, metres (a non-watertight mesh takes its hull's mass properties).
+    placement_normals : ``(P, 3)`` part-frame down direction of each reported placement
+        (:func:`down_normal` of its ``T_table_part``).
+    center_of_mass : part frame, metres; default the mesh's.
+    refused_normals : ``(Q, 3)`` part-frame down directions the planner refused on purpose (facets that
+        hold the COM with ``d / h`` below its margin); a rest matching none of the placements but one of
+        these is counted as *below margin* rather than missed.
+    drops : random orientations dropped (seeded by ``seed``).
+    perturb_deg : tilt of each placement's release, degrees, about a random horizontal axis.
+    match_deg : rests closer than this (degrees between down directions) are one; a rest matches a
+        placement within it.
+    drop_height : clearance of the lowest point at release, as a fraction of the scaled part's size.
+    size, min_width : the part is scaled so its largest extent is at least ``size`` and its smallest
+        width at least ``min_width`` metres (Bullet rounds convex shapes by a few millimetres: a 5 mm
+        strip of a thin cylinder's hull would roll like a true cylinder).
+    """
+    rng = np.random.default_rng(seed)
+    hull = convex_hull(mesh)
+    closed = is_closed(np.asarray(mesh.faces))
+    solid = mesh if closed else hull.mesh
+    com = np.asarray(solid.center_mass if center_of_mass is None else center_of_mass, dtype=float)
+    proj = hull.vertices @ hull.normals.T
+    width = float(np.min(proj.max(axis=0) - proj.min(axis=0)))  # smallest width of the hull
+    scale = max(size / float(np.ptp(hull.vertices, axis=0).max()), min_width / width)
+    # Inertia per unit mass about the COM, scaled; mass itself does not change where a body rests.
+    inertia = np.asarray(solid.moment_inertia, dtype=float) / max(float(solid.mass), 1e-300) * scale**2
+    if solid is mesh and center_of_mass is not None:  # trimesh's inertia is about its own COM: shift it
+        shift = (np.asarray(solid.center_mass) - com) * scale
+        inertia += np.dot(shift, shift) * np.eye(3) - np.outer(shift, shift)
+    normals = np.asarray(placement_normals, dtype=float).reshape(-1, 3)
+    normals = normals / np.linalg.norm(normals, axis=1, keepdims=True) if len(normals) else normals
+    extent = scale * float(np.ptp(hull.vertices, axis=0).max())  # of the simulated part, metres
+    world = _World(hull.vertices * scale, com * scale, inertia, friction=friction,
+                   rolling_friction=rolling_friction, time_step=time_step)
+    steps = dict(max_steps=int(max_seconds / time_step), window=int(1.0 / time_step), still_deg=0.1)
+    try:
+        settled: list[np.ndarray] = []
+        unsettled = 0
+        for R0 in Rotation.random(drops, random_state=int(rng.integers(2**31))).as_matrix():
+            R, ok = world.settle(R0, drop_height * extent, **steps)
+            unsettled += not ok
+            if ok:
+                settled.append(R.T @ _DOWN)
+        stays = np.zeros(len(normals), dtype=bool)
+        err = np.zeros(len(normals))
+        rolled = np.zeros(len(normals), dtype=bool)
+        heights = (hull.vertices @ normals.T).max(axis=0) - normals @ com  # COM height in each placement, m
+        for i, n in enumerate(normals):
+            # Rotation taking n to world down, then a small tilt about a random horizontal axis.
+            R, _ = Rotation.align_vectors([_DOWN], [n])
+            phi = rng.uniform(0.0, 2.0 * np.pi)
+            tilt = Rotation.from_rotvec(np.radians(perturb_deg) * np.array([np.cos(phi), np.sin(phi), 0.0]))
+            R_rest, _ = world.settle((tilt * R).as_matrix(), 1e-3 * extent, **steps)
+            ang = _angle_deg(R_rest.T @ _DOWN, normals)[0]
+            err[i] = float(ang[i])
+            stays[i] = err[i] < match_deg
+            # Settled in another reported placement at the same COM height: a part on a curved side
+            # rolled (a neutral rest), which toppling (the COM falls) is not.
+            j = int(np.argmin(ang))
+            rolled[i] = not stays[i] and bool(ang[j] < match_deg) and abs(heights[j] - heights[i]) <= 0.05 * heights[i]
+    finally:
+        world.close()
+    rest_n = np.array(settled).reshape(-1, 3)
+    labels = _cluster(rest_n, match_deg)
+    k = int(labels.max()) + 1 if len(labels) else 0
+    rests = np.zeros((k, 3))
+    counts = np.bincount(labels, minlength=k)
+    np.add.at(rests, labels, rest_n)
+    rests /= np.maximum(np.linalg.norm(rests, axis=1, keepdims=True), 1e-12)
+    match = np.full(k, -1, dtype=np.int64)
+    if k and len(normals):
+        ang = _angle_deg(rests, normals)
+        best = ang.argmin(axis=1)
+        match = np.where(ang[np.arange(k), best] < match_deg, best, -1)
+    refused = np.asarray(refused_normals if refused_normals is not None else np.zeros((0, 3)), float).reshape(-1, 3)
+    if k and len(refused):
+        near = _angle_deg(rests, refused / np.linalg.norm(refused, axis=1, keepdims=True)).min(axis=1) < match_deg
+        match = np.where((match < 0) & near, -2, match)
+    order = np.argsort(-counts, kind="stable")
+    return DropReport(
+        placement_normals=normals,
+        rests=rests[order],
+        rest_counts=counts[order],
+        rest_match=match[order],
+        stays=stays,
+        rolled=rolled,
+        release_error_deg=err,
+        unsettled=unsettled,
+        drops=drops,
+    )
