@@ -17,7 +17,9 @@ within ``roll_angle`` (default 15 degrees) of this one and either topples
 back onto this facet or holds the COM with ``d / h >= min_margin`` against
 its own steep edges (dihedral of ``roll_angle`` or more: the ones it could
 topple over; a strip next to a D-peg's flat is not such a facet, so its
-neighbours are measured against the edge onto it); ``d`` is measured to the other
+neighbours are measured against the edge onto it) with the COM no lower
+there (a neutral or uphill roll; rolling downhill leaves the rest: the
+strips of a D-peg above its lowest one); ``d`` is measured to the other
 edges only, the ones the part can topple over (the cylinder's end caps).
 A facet that holds the COM with every edge a rolling edge has nothing to
 topple over: its ``distance`` is infinite. Why 15 degrees: a regular
@@ -46,6 +48,9 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from asmteach.plugins.planners.placements.facets import SupportFacets, cross
+
+# Relative COM-height tolerance of a neutral roll (a cylinder's strips are level to rounding).
+_LEVEL_REL = 1e-4
 
 __all__ = ["DirectionStability", "FacetStability", "evaluate_direction", "facet_stability", "plane_basis"]
 
@@ -159,7 +164,10 @@ def facet_stability(
     steep_d = np.full(n_c, np.inf)
     np.minimum.at(steep_d, own[~shallow], s[~shallow])
     firm = holds & (steep_d / safe_h >= min_margin)
-    rolling = holds[own] & shallow & ((final[nb] == own) | firm[nb])
+    # Rolling onto a firm facet must not lower the COM (a neutral or uphill roll): on a D-peg lying on its
+    # round side the strips above the lowest one roll down toward it, so they are not rests of their own.
+    level = height[nb] >= height[own] * (1.0 - _LEVEL_REL)
+    rolling = holds[own] & shallow & ((final[nb] == own) | (firm[nb] & level))
     distance = np.where(holds, np.inf, distance)
     np.minimum.at(distance, own[~rolling & holds[own]], s[~rolling & holds[own]])
     rolls = np.bincount(own[rolling], minlength=n_c) > 0
