@@ -21,6 +21,7 @@ from asmteach.core.config import format_validation_error
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
 from asmteach.core.io import read_yaml
+from asmteach.core.mesh_repair import repair_mesh
 from asmteach.core.models import AssemblyTask, PartSpec, Primitive, SolidSpec, resolve_relative
 
 __all__ = [
@@ -68,8 +69,10 @@ def build_solid(solid: SolidSpec) -> trimesh.Trimesh:
 def load_mesh_file(path: Path, units: str = "m") -> trimesh.Trimesh:
     """Load an STL/OBJ/PLY mesh in metres; refuses millimetres given as metres.
 
-    Non-watertight meshes are replaced by their convex hull (with a warning),
-    since mass properties and stable placements need a closed surface.
+    Small defects (open edges, flipped faces, an inverted shell) are repaired
+    by :func:`asmteach.core.mesh_repair.repair_mesh`, with a warning naming
+    each change; a mesh whose holes cannot be closed is refused with where
+    the hole is (mass, placements and collision pieces need a closed surface).
     """
     if not path.is_file():
         raise UserError(f"mesh file {path} does not exist")
@@ -90,12 +93,18 @@ def load_mesh_file(path: Path, units: str = "m") -> trimesh.Trimesh:
         )
     if ext < MIN_EXTENT_M:
         raise UserError(f"{path}: the mesh is only {ext * 1000:.3f} mm across; it is degenerate or in the wrong units")
-    if not mesh.is_watertight:
-        log.warning("%s is not watertight; using its convex hull for mass and placements", path)
-        mesh = mesh.convex_hull
-    if mesh.volume <= 0:
-        mesh.invert()
+    mesh, notes = repair_mesh(mesh, name=str(path))
+    for note in notes:
+        log.warning("%s: %s", path.name, note)
     return mesh
+
+
+def _inside_hull(mesh: trimesh.Trimesh, point: np.ndarray, tol: float = 1e-9) -> bool:
+    """Whether ``point`` (metres) lies in the mesh's convex hull: every hull facet's half-space holds it."""
+    from scipy.spatial import ConvexHull
+
+    eq = ConvexHull(np.asarray(mesh.vertices, dtype=float)).equations  # rows [n, d]: n . x + d <= 0 inside
+    return bool(np.all(eq[:, :3] @ np.asarray(point, dtype=float) + eq[:, 3] <= tol))
 
 
 def mesh_hash(mesh: trimesh.Trimesh) -> str:
@@ -116,7 +125,7 @@ def build_part(spec: PartSpec, base_dir: Path | None = None) -> PartModel:
     mass = spec.mass if spec.mass is not None else spec.density * volume
     if spec.center_of_mass is not None:
         com = np.asarray(spec.center_of_mass, dtype=float)
-        if not mesh.convex_hull.contains([com])[0]:
+        if not _inside_hull(mesh, com):
             raise UserError(
                 f"part {spec.name!r}: center_of_mass {com.tolist()} m lies outside the part's convex hull; "
                 "give it in the part frame in metres"
