@@ -27,9 +27,9 @@ import numpy as np
 import pybullet
 
 from asmteach.core import geometry
+from asmteach.core.convex_pieces import decompose
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Grasp, HandSpec
-from asmteach.plugins.planners.grasps.convex import convex_pieces
 from asmteach.plugins.planners.grasps.hand_geometry import hand_boxes
 
 __all__ = ["HoldResult", "HoldSimulator"]
@@ -78,7 +78,8 @@ class HoldSimulator:
         self.hand_mass = hand_mass
         self.finger_mass = finger_mass
         self.client = pybullet.connect(pybullet.DIRECT)
-        self.pieces = convex_pieces(part)
+        # the project's one convex decomposition (exact for solids and CAD meshes), as closed hulls
+        self.pieces = decompose(part).hulls()
 
     def close(self) -> None:
         """Disconnect the simulator."""
@@ -260,7 +261,13 @@ class HoldSimulator:
         risen = float(T_world_part_end[2, 3] - z0)
         drift = geometry.translation_distance(T_tcp_part0, T_tcp_part1)
         angle = geometry.rotation_distance(T_tcp_part0, T_tcp_part1)
-        touching = [len(pybullet.getContactPoints(gripper, part, linkIndexA=j, physicsClientId=c)) > 0 for j in (0, 1)]
+        # Touching: a contact point, or the pad within 0.5 mm of the part (Bullet's manifold of a thin part
+        # squeezed between two pads can be empty at a given step while the part hangs in the grip).
+        touching = [
+            len(pybullet.getContactPoints(gripper, part, linkIndexA=j, physicsClientId=c)) > 0
+            or len(pybullet.getClosestPoints(gripper, part, 5e-4, linkIndexA=j, physicsClientId=c)) > 0
+            for j in (0, 1)
+        ]
         held = risen >= 0.8 * lift and all(touching)
         reason = "" if held else ("dropped" if risen < 0.8 * lift else "lost contact with a finger")
         return HoldResult(held=held, lift=risen, drift=drift, drift_angle=angle, reason=reason)

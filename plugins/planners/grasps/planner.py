@@ -68,8 +68,14 @@ from asmteach.core.io import cache_root, write_json
 from asmteach.core.models import Grasp, HandSpec, StrictModel
 from asmteach.core.parts import mesh_hash
 from asmteach.plugins.planners.grasps.antipodal import antipodal_angles, friction_half_angle
-from asmteach.plugins.planners.grasps.checks import check_graspable_width, check_mesh, check_wall_thickness
-from asmteach.plugins.planners.grasps.hand_geometry import MeshCollider, hand_boxes, pad_grid
+from asmteach.plugins.planners.grasps.checks import (
+    check_graspable_width,
+    check_mesh,
+    check_too_small,
+    check_wall_thickness,
+)
+from asmteach.plugins.planners.grasps.contact import PadStrip, load_ratio, pad_contacts, pad_strip
+from asmteach.plugins.planners.grasps.hand_geometry import MeshCollider, hand_boxes
 from asmteach.plugins.planners.grasps.sampling import ContactPairs, Raycaster, find_opposite_contacts, sample_surface
 from asmteach.plugins.planners.placements.planner import compute_placements
 
@@ -78,7 +84,7 @@ __all__ = ["AntipodalGraspPlanner", "AntipodalSettings", "default_cache_dir", "r
 
 log = logging.getLogger(__name__)
 
-CACHE_VERSION = 3
+CACHE_VERSION = 4
 # Fingers checked this far off the contact planes when closed (metres), so touching is not colliding.
 _CONTACT_GAP = 2e-4
 # Shallow grasps set back less than this (metres) are the centred grasp again, for every purpose.
@@ -95,7 +101,10 @@ class ScoreWeights(StrictModel):
 
     com: float = Field(0.5, ge=0.0, description="grasp axis close to the centre of mass (less torque to resist)")
     alignment: float = Field(0.2, ge=0.0, description="contact normals along the grasp axis (deep in the cone)")
-    pad: float = Field(0.3, ge=0.0, description="fraction of the pads' area in contact with the surface")
+    pad: float = Field(
+        0.3, ge=0.0,
+        description="the worse pad's torsion radius (contact patch, soft pad) over a fully pressed pad's: "
+        "patches beat lines, lines beat points")
 
 
 class AntipodalSettings(StrictModel):
@@ -111,12 +120,25 @@ class AntipodalSettings(StrictModel):
         "full",
         description="the hand on its approach: fully open (the Nextage plugin opens the gripper completely before "
         "every approach, in execution and in the plan re-check) or pre-shaped to the width plus clearance a side")
-    pad_grid: tuple[int, int] = Field((4, 5), description="pad sample points along the pad's x and z")
-    pad_tolerance: float = Field(0.001, gt=0.0, description="surface within this distance of the pad plane")
+    pad_grid: tuple[int, int] = Field(
+        (7, 9), description="pad sample points along the pad's x and z (odd counts put one on the pad centre)")
+    compliance: float = Field(
+        0.0015, gt=0.0, le=0.01,
+        description="compressible depth of the soft pads (metres): surface within this depth of the first touch "
+        "is in contact, and no point of the part may stand further in front of the planned contact's pad plane")
     pad_inset: float = Field(0.0005, ge=0.0, description="pad samples kept this far inside the pad edge")
+    edge_margin: float = Field(
+        0.004, ge=0.0,
+        description="set-backs keep the contacts at least this far inside the pad's fingertip edge (metres): a "
+        "contact on the very edge of the pad slips off it")
     pad_min_support: float = Field(
-        0.5, gt=0.0, le=1.0, description="fraction of each pad that must lie on the surface (1.0: fully on it)"
-    )
+        0.0, ge=0.0, le=1.0,
+        description="optional: share of each pad that must be in contact (1.0: pads fully on a face); 0 leaves it "
+        "to the contact model, which accepts line and point contacts on curved parts")
+    hold_safety: float = Field(
+        1.5, ge=0.0,
+        description="the grasp must bear this multiple of the part's weight and of its moment about the grasp "
+        "axis (soft-finger limit surface, friction mu, force hand.max_force per pad); 0 turns the check off")
     min_thickness: float = Field(0.002, gt=0.0, description="walls thinner than this mark a thin shell")
     dedup_distance: float = Field(0.005, ge=0.0, description="TCPs closer than this ...")
     dedup_angle_deg: float = Field(15.0, ge=0.0, le=180.0, description="... and rotations closer than this are one")
@@ -124,13 +146,16 @@ class AntipodalSettings(StrictModel):
         600, ge=1,
         description="keep at most this many; each resting pose of the part can use only those approaching from "
         "above it, about a quarter")
-    depth_levels: int = Field(
-        6, ge=1, le=32,
-        description="TCP set-backs tried along -z, evenly from 0 to half the pad length minus pad_inset; 1: pads "
-        "always centred on the contacts")
-    depth_refine: int = Field(3, ge=0, le=10, description="bisection steps refining the shallowest supported set-back")
+    set_backs: bool = Field(
+        True,
+        description="also offer each orientation at its shallowest set-back (TCP moved back along -z, at most half "
+        "a pad length, in steps of half the pad grid's row spacing); False: pads always centred on the contacts")
     approach_bins: int = Field(
         32, ge=1, le=1000, description="approach directions (part frame) the kept grasps are spread over")
+    rest_poses: int = Field(
+        24, ge=0, le=1000,
+        description="resting poses of the part (most probable first) that each get, per contact pair, the "
+        "orientation approaching most steeply from above, and their own buckets in the selection")
     weights: ScoreWeights = Field(default_factory=ScoreWeights)
     cache: bool = Field(True, description="read and write the on-disk cache")
     cache_dir: str | None = Field(None, description="cache folder; default $ASMTEACH_CACHE_DIR or ~/.cache/asmteach")
@@ -219,10 +244,14 @@ class AntipodalGraspPlanner(GraspPlanner):
         rc = Raycaster(mesh)
         samples = sample_surface(mesh, s.samples, self.rng(1), facet_centres=s.facet_centres, raycaster=rc)
         pairs, widths = find_opposite_contacts(samples, rc)
-        check_wall_thickness(widths, part.name, s.min_thickness)
         max_opening = hand.max_width - 2.0 * s.clearance
-        check_graspable_width(widths, part.name, hand, max_opening)
+        # walls: the first exit of each sample's ray; graspable widths: every pair, across cavities too
+        all_widths = np.concatenate([widths, pairs.width])
+        check_too_small(all_widths, part.name, hand, s.min_thickness)
+        check_wall_thickness(widths, part.name, s.min_thickness)
+        check_graspable_width(all_widths, part.name, hand, max_opening, mesh=mesh)
         stats: dict[str, Any] = {"samples": len(widths), "pairs": len(pairs)}
+        self.last_stats = stats  # filled in as planning goes, so a refusal leaves the counts that led to it
 
         pairs = pairs.subset((pairs.width >= max(hand.min_width, s.min_thickness)) & (pairs.width <= max_opening))
         stats["in_stroke"] = len(pairs)
@@ -233,31 +262,58 @@ class AntipodalGraspPlanner(GraspPlanner):
         stats["force_closure"] = len(pairs)
         if len(pairs) == 0:
             raise UserError(
-                f"part {part.name!r}: no force-closure pair within the stroke (friction cone "
-                f"{np.degrees(cone):.1f} deg for mu={s.mu}); the opposite faces are not parallel enough"
+                f"part {part.name!r}: no opposing surfaces: no two faces within the hand's "
+                f"{max_opening * 1000:.1f} mm opening face each other within the friction cone "
+                f"({np.degrees(cone):.1f} deg for mu={s.mu}), so a parallel jaw would squeeze it out; grasp it with a "
+                "fixture or another gripper, or raise mu if the pads really grip better"
             )
 
-        down = resting_directions(part)
+        # A round part rests in hundreds of poses (a sphere on each facet), each nearly improbable: the
+        # most probable ones get their own steepest approach (the rest are covered by the orientation grid).
+        down = resting_directions(part)[: s.rest_poses]
         R, pair_idx = self._orientations(pairs, mesh.extents, down)
-        cand = self._set_backs(rc, hand, pairs, R, pair_idx)
-        R, pair_idx, support = cand.R, cand.pair_idx, cand.support
-        stats["pads_supported"] = len(pair_idx)
+        stats["candidates"] = len(pair_idx)
+        cand, counts = self._contacts(part, rc, hand, pairs, R, pair_idx)
+        stats.update(counts)
+        stats["pads_supported"] = len(cand.pair_idx)  # passed the contact model (name kept for the benchmarks)
         stats["shallow"] = int(np.count_nonzero(cand.shallow))
-        if len(pair_idx) == 0:
-            raise UserError(
-                f"part {part.name!r}: no grasp has {s.pad_min_support:.0%} of both "
-                f"{hand.pad_size[0] * 1000:.0f} x {hand.pad_size[1] * 1000:.0f} mm pads on the surface "
-                "(faces too small or curved for the pads)"
-            )
-        score = self._score(part, pairs, angles, pair_idx, support, cone, mesh.extents)
-        grasps, n_dup, n_col = self._select(part, hand, pairs, cand, score, down)
+        if len(cand.pair_idx) == 0:
+            raise UserError(self._no_contact_reason(part, hand, counts))
+        score = self._score(part, pairs, angles, cand.pair_idx, cand.support, cone, mesh.extents)
+        grasps, n_dup, n_col, kept = self._select(part, hand, pairs, cand, score, down)
         stats.update(duplicates=n_dup, colliding=n_col, kept=len(grasps))
+        if len(kept):
+            stats["contact_share_median"] = round(float(np.median(cand.share[kept])), 3)
+            stats["torsion_radius_median_mm"] = round(float(np.median(cand.radius[kept])) * 1000, 2)
         if not grasps:
             raise UserError(
-                f"part {part.name!r}: all {len(pair_idx)} grasps with supported pads make the hand collide "
-                "with the part"
+                f"part {part.name!r}: all {len(cand.pair_idx)} grasps in contact make the hand collide with the "
+                "part (no room for the fingers beside the contacts)"
             )
         return grasps, stats
+
+    def _no_contact_reason(self, part: PartModel, hand: HandSpec, counts: dict[str, int]) -> str:
+        """One line naming why no candidate passed the contact model (``counts`` from :meth:`_contacts`)."""
+        s = self.settings
+        c = s.compliance * 1000
+        if counts["protruding"] == counts["candidates"]:
+            return (
+                f"part {part.name!r}: no opposing surfaces the pads can press: at every antipodal pair, material "
+                f"stands more than the pads' {c:.1f} mm compliance in front of a pad (the contacts lie in pockets, "
+                f"grooves or beside ridges narrower than the {hand.pad_size[0] * 1000:.0f} x "
+                f"{hand.pad_size[1] * 1000:.0f} mm pads); use narrower fingers or softer pads (compliance)"
+            )
+        if counts["overloaded"] > 0 and counts["short_support"] == 0:
+            return (
+                f"part {part.name!r}: too heavy for the hand: {part.mass:.3g} kg; no grasp bears "
+                f"{s.hold_safety:g}x its weight and moment about the grasp axis with {hand.max_force:g} N per pad "
+                f"at mu={s.mu}; use a stronger gripper, or check the part's mass/density"
+            )
+        return (
+            f"part {part.name!r}: no grasp has {s.pad_min_support:.0%} of both {hand.pad_size[0] * 1000:.0f} x "
+            f"{hand.pad_size[1] * 1000:.0f} mm pads in contact (faces too small or curved); lower pad_min_support "
+            "(0 accepts line and point contacts)"
+        )
 
     def _orientations(
         self, pairs: ContactPairs, extents: np.ndarray, down: np.ndarray
@@ -298,90 +354,57 @@ class AntipodalGraspPlanner(GraspPlanner):
         R_rest = np.stack([np.cross(y[pi], zr), y[pi], zr], axis=-1)
         return np.concatenate([R, R_rest]), np.concatenate([pair_idx, pi])
 
-    def _pad_support(self, rc: Raycaster, hand: HandSpec, c0: np.ndarray, c1: np.ndarray, R: np.ndarray) -> np.ndarray:
-        """Supported fraction of the worse pad, per candidate; ``-1`` where material protrudes into a pad.
+    def _contacts(
+        self, part: PartModel, rc: Raycaster, hand: HandSpec, pairs: ContactPairs, R: np.ndarray,
+        pair_idx: np.ndarray,
+    ) -> tuple[_Candidates, dict[str, int]]:
+        """Candidates passing the contact model (:mod:`.contact`), centred and at their shallowest set-back.
 
-        ``c0``, ``c1``: ``(m, 3)`` pad centres of finger 0 and 1 (part frame,
-        metres), on the contact planes; ``R``: ``(m, 3, 3)`` TCP rotations.
-        Each pad point is cast from ``probe`` metres outside the pad plane toward
-        the part along the jaw axis: it is supported when it enters the surface
-        within ``pad_tolerance`` of the plane; an earlier hit is material in
-        front of the pad (the candidate is refused), a later hit or none is a
-        gap under the pad (an edge overhang or a hole).
+        Per orientation and set-back ``d`` (the TCP and both pads moved by ``-d * z``, the contacts under
+        the pads): refused when material stands more than ``compliance`` in front of a pad plane, when a
+        pad's share in contact is under ``pad_min_support``, or when the two contact patches cannot bear
+        ``hold_safety`` times the part's weight and moment about the grasp axis. Kept: the centred grasp
+        when it passes, and the deepest passing set-back of at least ``_MIN_SET_BACK``. Returns the
+        candidates and the refusal counts (``candidates``, ``protruding``, ``short_support``,
+        ``overloaded``), each counted at the centred pad.
         """
         s = self.settings
-        grid = pad_grid(hand, s.pad_grid[0], s.pad_grid[1], inset=s.pad_inset)
-        x, y, z = R[:, :, 0], R[:, :, 1], R[:, :, 2]
-        offsets = grid[None, :, 0:1] * x[:, None, :] + grid[None, :, 1:2] * z[:, None, :]  # (m, g, 3)
-        probe = s.pad_tolerance + max(s.clearance, 0.002)
-        fractions = []
-        blocked = np.zeros(len(R), dtype=bool)
-        for contact, sign in ((c0, 1.0), (c1, -1.0)):
-            direction = sign * y  # finger 0 pushes along +y, finger 1 along -y
-            pts = contact[:, None, :] + offsets
-            origins = pts - probe * direction[:, None, :]
-            dirs = np.broadcast_to(direction[:, None, :], pts.shape).reshape(-1, 3)
-            t, normals, _ = rc.cast(origins.reshape(-1, 3), dirs)
-            entering = np.einsum("ij,ij->i", normals, dirs) < 0.0
-            ok = (entering & (np.abs(t - probe) <= s.pad_tolerance)).reshape(len(R), -1)
-            # A ray that starts inside material (it leaves instead of entering) or enters
-            # before the plane meets something the pad would push into.
-            early = (np.isfinite(t) & ((~entering) | (t < probe - s.pad_tolerance))).reshape(len(R), -1)
-            blocked |= early.any(axis=1)
-            fractions.append(ok.mean(axis=1))
-        return np.where(blocked, -1.0, np.minimum(*fractions))
-
-    def _set_backs(
-        self, rc: Raycaster, hand: HandSpec, pairs: ContactPairs, R: np.ndarray, pair_idx: np.ndarray
-    ) -> _Candidates:
-        """Supported candidates: each orientation centred and at its shallowest set-back (module docstring, 6).
-
-        The set-back ``d`` (metres) moves the TCP and both pad centres by
-        ``-d * z``; it ranges over ``[0, pad_size[1] / 2 - pad_inset]`` so the
-        sampled contacts stay under the pads. The shallowest is the largest of
-        ``depth_levels`` even steps with both pads supported, refined by
-        ``depth_refine`` bisections toward the next, unsupported step.
-        """
-        s = self.settings
-        m = len(R)
-        z = R[:, :, 2]
-        c0, c1 = pairs.p0[pair_idx], pairs.p1[pair_idx]
-
-        def support_at(d: np.ndarray, sel: np.ndarray) -> np.ndarray:
-            off = d[:, None] * z[sel]
-            return self._pad_support(rc, hand, c0[sel] - off, c1[sel] - off, R[sel])
-
-        def ok(sup: np.ndarray) -> np.ndarray:
-            return sup >= s.pad_min_support - 1e-9
-
-        everyone = np.arange(m)
-        d_max = max(0.5 * float(hand.pad_size[1]) - s.pad_inset, 0.0)
-        levels = np.linspace(0.0, d_max, s.depth_levels) if s.depth_levels > 1 and d_max > 0 else np.zeros(1)
-        sup = np.stack([support_at(np.full(m, lv), everyone) for lv in levels])  # (levels, m)
-        good = ok(sup)
-        centred = good[0]
-        # The shallowest supported step, refined toward the next (unsupported) one by bisection.
-        top = len(levels) - 1 - np.argmax(good[::-1], axis=0)
-        lo = levels[top].astype(float)
-        lo_sup = sup[top, everyone]
-        idx = np.flatnonzero(good.any(axis=0) & (top < len(levels) - 1))
-        if len(levels) > 1 and len(idx):
-            hi = lo[idx] + (levels[1] - levels[0])
-            for _ in range(s.depth_refine):
-                mid = 0.5 * (lo[idx] + hi)
-                sm = support_at(mid, idx)
-                up = ok(sm)
-                lo[idx[up]], lo_sup[idx[up]] = mid[up], sm[up]
-                hi = np.where(up, hi, mid)
-        deep = good.any(axis=0) & (lo >= _MIN_SET_BACK)
-        keep_c = np.flatnonzero(centred)
+        strip = pad_strip(hand, s.pad_grid[0], s.pad_grid[1], inset=s.pad_inset, edge_margin=s.edge_margin,
+                          set_backs=s.set_backs)
+        probe = s.compliance + max(s.clearance, 0.002)
+        pc = pad_contacts(rc, strip, pairs.p0, pairs.p1, R, pair_idx, s.compliance, probe)
+        y = R[:, :, 1]
+        rel = np.asarray(part.center_of_mass, dtype=float)[None, :] - pairs.p0[pair_idx]
+        d_com = np.linalg.norm(rel - np.einsum("ij,ij->i", rel, y)[:, None] * y, axis=1)
+        load = load_ratio(part.mass, hand.max_force, s.mu, d_com[:, None], pc.torsion_radius, s.hold_safety)
+        if s.hold_safety == 0.0:
+            load = np.zeros_like(load)
+        short = pc.share < s.pad_min_support - 1e-9
+        loaded = load > 1.0
+        good = ~pc.protrusion & ~short & ~loaded  # (m, levels)
+        counts = {
+            "candidates": len(R),
+            "protruding": int(np.count_nonzero(pc.protrusion[:, 0])),
+            "short_support": int(np.count_nonzero(~pc.protrusion[:, 0] & short[:, 0])),
+            "overloaded": int(np.count_nonzero(~pc.protrusion[:, 0] & ~short[:, 0] & loaded[:, 0])),
+        }
+        levels = len(strip.set_backs)
+        deepest = levels - 1 - np.argmax(good[:, ::-1], axis=1)
+        deep = good.any(axis=1) & (strip.set_backs[deepest] >= _MIN_SET_BACK)
+        keep_c = np.flatnonzero(good[:, 0])
         keep_s = np.flatnonzero(deep)
+        lv = np.concatenate([np.zeros(len(keep_c), dtype=int), deepest[keep_s]])
+        idx = np.concatenate([keep_c, keep_s])
+        radius = pc.torsion_radius[idx, lv].min(axis=1)
+        full = _full_pad_radius(strip)
         return _Candidates(
-            R=np.concatenate([R[keep_c], R[keep_s]]),
-            pair_idx=np.concatenate([pair_idx[keep_c], pair_idx[keep_s]]),
-            depth=np.concatenate([np.zeros(len(keep_c)), lo[keep_s]]),
-            support=np.concatenate([sup[0, keep_c], lo_sup[keep_s]]),
-        )
+            R=R[idx],
+            pair_idx=pair_idx[idx],
+            depth=strip.set_backs[lv],
+            support=np.minimum(radius / full, 1.0) if full > 0 else np.ones(len(idx)),
+            share=pc.share[idx, lv],
+            radius=radius,
+        ), counts
 
     def _score(
         self,
@@ -411,7 +434,7 @@ class AntipodalGraspPlanner(GraspPlanner):
         cand: _Candidates,
         score: np.ndarray,
         down: np.ndarray,
-    ) -> tuple[list[Grasp], int, int]:
+    ) -> tuple[list[Grasp], int, int, np.ndarray]:
         """Round robin over the buckets, best first in each: skip near-duplicates of kept grasps, then collisions.
 
         Each round gives every bucket that still has candidates one kept grasp
@@ -419,7 +442,8 @@ class AntipodalGraspPlanner(GraspPlanner):
         duplicates before collisions gives the same set as filtering collisions
         first (a candidate is only ever compared with kept, collision-free
         grasps) while calling fcl far less. The result is sorted by score, best
-        first, ids ``0..n-1``; ``down``: resting directions (part frame).
+        first, ids ``0..n-1``; ``down``: resting directions (part frame). Also returns the duplicate and
+        collision counts and the kept candidates' indices, in the grasps' order.
         """
         s = self.settings
         collider = MeshCollider({"part": (part.mesh, np.eye(4))})
@@ -454,8 +478,9 @@ class AntipodalGraspPlanner(GraspPlanner):
             T = np.eye(4)
             T[:3, :3], T[:3, 3] = Ri, tcp
             width = float(pairs.width[cand.pair_idx[i]])
-            # Closed on the part (fingers just off the contact planes) and open on the way in.
-            closed = hand_boxes(hand, width + 2.0 * _CONTACT_GAP)
+            # Closed on the part and open on the way in. Closed, the fingers stand off the contact planes by
+            # the pads' compliance: material within it is the pads' contact patch (the contact model's).
+            closed = hand_boxes(hand, width + 2.0 * (_CONTACT_GAP + s.compliance))
             approach = hand_boxes(hand, float(opening[i]), sweep=s.approach_sweep)
             if collider.collides(closed, T) or collider.collides(approach, T):
                 n_col += 1
@@ -483,12 +508,12 @@ class AntipodalGraspPlanner(GraspPlanner):
                 Grasp(id=k, p0=pairs.p0[j] - off, p1=pairs.p1[j] - off, R=R[i], width=float(pairs.width[j]),
                       score=float(score[i]))
             )
-        return grasps, n_dup, n_col
+        return grasps, n_dup, n_col, np.asarray(kept, dtype=int)
 
 
 @dataclass
 class _Candidates:
-    """Grasp candidates with supported pads (part frame): rotations, contact pair, set-back and support."""
+    """Grasp candidates that pass the contact model (part frame): rotations, contact pair, set-back, contact."""
 
     R: np.ndarray
     """``(m, 3, 3)`` TCP rotations."""
@@ -497,12 +522,23 @@ class _Candidates:
     depth: np.ndarray
     """``(m,)`` set-back of the TCP along its -z from the contacts' midpoint (metres)."""
     support: np.ndarray
-    """``(m,)`` supported fraction of the worse pad."""
+    """``(m,)`` the worse pad's torsion radius over a fully pressed pad's, in [0, 1]."""
+    share: np.ndarray
+    """``(m,)`` share of the worse pad in contact (a patch: up to 1; a line or a point: a few pad points)."""
+    radius: np.ndarray
+    """``(m,)`` the worse pad's torsion radius (metres)."""
 
     @property
     def shallow(self) -> np.ndarray:
         """``(m,)`` bool: at the shallowest set-back (else the pads are centred on the contacts)."""
         return self.depth > 0.0
+
+
+def _full_pad_radius(strip: PadStrip) -> float:
+    """Torsion radius (metres) of a pad fully and evenly pressed, about its centre: the mean distance of its
+    sample points from the centre (the reference of the ``pad`` score)."""
+    z = strip.z[strip.windows[0]]
+    return float(np.mean(np.hypot(strip.x[:, None], z[None, :] - z.mean())))
 
 
 def resting_directions(part: PartModel) -> np.ndarray:

@@ -51,6 +51,13 @@ class Raycaster:
         ids[miss] = -1
         return t, normals, ids
 
+    def inside(self, points: np.ndarray) -> np.ndarray:
+        """``(n,)`` bool: the points lie inside the closed mesh (ray parity, majority of 3 rays)."""
+        if len(points) == 0:
+            return np.zeros(0, dtype=bool)
+        q = o3d.core.Tensor(np.asarray(points, dtype=np.float32))
+        return self.scene.compute_occupancy(q, nsamples=3).numpy() > 0.5
+
     def closest(self, points: np.ndarray) -> np.ndarray:
         """Closest surface points to ``(n, 3)`` query points."""
         q = o3d.core.Tensor(np.asarray(points, dtype=np.float32))
@@ -143,12 +150,22 @@ def _facet_centres(mesh: trimesh.Trimesh, raycaster: Raycaster) -> tuple[np.ndar
     return c[on_surface], np.asarray(normals)[on_surface], np.asarray(ids)[on_surface]
 
 
-def find_opposite_contacts(samples: SurfaceSamples, raycaster: Raycaster) -> tuple[ContactPairs, np.ndarray]:
+def find_opposite_contacts(
+    samples: SurfaceSamples, raycaster: Raycaster, *, across: bool = True, max_crossings: int = 8
+) -> tuple[ContactPairs, np.ndarray]:
     """Cast from each sample through the part along ``-normal``; the exit point is ``p1``.
 
     Returns the pairs whose ray left the part through a face facing away from
     the ray origin (a proper exit), and the ``(n,)`` array of all through-part
-    distances (``inf`` where the ray found no exit: open meshes, flipped normals).
+    distances to that first exit (``inf`` where the ray found no exit: open
+    meshes, flipped normals), the wall thickness at each sample.
+
+    With ``across``, a ray that enters the part again after its first exit (a
+    tube's bore, a wheel's spoke window) is followed to its last exit, up to
+    ``max_crossings`` more crossings, and that pair is added too: a jaw closing
+    from outside meets the part's outermost surfaces, so a tube is grasped
+    across its diameter, not only across its wall (which would put a finger in
+    the bore).
     """
     d = -samples.normals
     origins = samples.points + _START_INSET * d
@@ -157,4 +174,32 @@ def find_opposite_contacts(samples: SurfaceSamples, raycaster: Raycaster) -> tup
     width = np.where(exits, t + _START_INSET, np.inf)
     p1 = origins + t[:, None] * d
     pairs = ContactPairs(samples.points, samples.normals, p1, n1, width, samples.from_facet).subset(exits)
+    if not across:
+        return pairs, width
+    last_p, last_n = p1.copy(), n1.copy()
+    far = np.zeros(len(d), dtype=bool)
+    active = np.flatnonzero(exits)
+    for _ in range(max_crossings):
+        if len(active) == 0:
+            break
+        # From the last exit: the next entry, if any, then its exit.
+        o = last_p[active] + _START_INSET * d[active]
+        t_in, n_in, _ = raycaster.cast(o, d[active])
+        entry = np.isfinite(t_in) & (np.einsum("ij,ij->i", n_in, d[active]) < 0.0)
+        active, o, t_in = active[entry], o[entry], t_in[entry]
+        if len(active) == 0:
+            break
+        q = o + (t_in + _START_INSET)[:, None] * d[active]
+        t_out, n_out, _ = raycaster.cast(q, d[active])
+        ok = np.isfinite(t_out) & (np.einsum("ij,ij->i", n_out, d[active]) > 0.0)
+        active, q, t_out, n_out = active[ok], q[ok], t_out[ok], n_out[ok]
+        last_p[active] = q + t_out[:, None] * d[active]
+        last_n[active] = n_out
+        far[active] = True
+    if np.any(far):
+        w = np.linalg.norm(last_p[far] - samples.points[far], axis=1)
+        extra = ContactPairs(samples.points[far], samples.normals[far], last_p[far], last_n[far], w,
+                             samples.from_facet[far])
+        pairs = ContactPairs(*(np.concatenate([getattr(pairs, f), getattr(extra, f)]) for f in
+                               ("p0", "n0", "p1", "n1", "width", "from_facet")))
     return pairs, width

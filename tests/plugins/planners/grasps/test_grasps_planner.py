@@ -102,7 +102,8 @@ def test_full_pad_support_is_stricter(block, hand, tmp_path) -> None:
             for a, c in itertools.product((-0.0095, 0.0095), (-0.0145, 0.0145)):
                 q = p + a * g.R[:, 0] + c * g.R[:, 2] - [0, 0, 0.015]
                 others = [i for i in range(3) if i != axis]
-                assert np.all(np.abs(q[others]) <= ext[others] / 2 + 1e-6)
+                # within the contact model's gap grid resolution (pad points read the nearest of a 1.25 mm grid)
+                assert np.all(np.abs(q[others]) <= ext[others] / 2 + 0.0009)
 
 
 def test_seeded_and_cached(block, hand, tmp_path) -> None:

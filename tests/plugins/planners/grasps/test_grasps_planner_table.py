@@ -79,20 +79,28 @@ def test_low_bar_on_table_has_grasps_from_above_clear_of_it(bar, hand) -> None:
         assert abs(abs(g.p0[axis]) - half) < 1e-6 and abs(abs(g.p1[axis]) - half) < 1e-6
 
 
-def test_set_back_pads_stay_half_on_the_faces(bar, hand, bar_grasps) -> None:
-    """Every kept grasp, set back or not: at least half of each pad lies on the surface."""
+def test_set_back_pads_press_the_faces(bar, hand, bar_grasps) -> None:
+    """Every kept grasp, set back or not (the soft-pad contact model, checked by distances instead of rays):
+    a contact lies under each pad at least ``edge_margin`` inside its fingertip edge, and no part material
+    stands more than the pads' compliance in front of either pad plane."""
+    s = AntipodalGraspPlanner.Settings()
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(
         o3d.core.Tensor(np.asarray(bar.mesh.vertices, dtype=np.float32)),
         o3d.core.Tensor(np.asarray(bar.mesh.faces, dtype=np.uint32)),
     )
-    grid = pad_grid(hand, 4, 5, inset=0.0005)  # the planner's pad points, checked by distance instead of rays
+    grid = pad_grid(hand, 9, 13, inset=0.0005)
+    reach = 0.5 * hand.pad_size[1] - s.edge_margin
     for g in bar_grasps:
-        x, z = g.R[:, 0], g.R[:, 2]
-        for p in (g.p0, g.p1):
-            pts = np.asarray([p + a * x + c * z for a, c in grid], dtype=np.float32)
-            d = scene.compute_distance(o3d.core.Tensor(pts)).numpy()
-            assert (d < 1e-4).mean() >= 0.5 - 1e-9, g.id
+        x, y, z = g.R[:, 0], g.R[:, 1], g.R[:, 2]
+        for p, out in ((g.p0, -y), (g.p1, y)):
+            # the contact: on the pad's centre line, from the pad centre up to `reach` toward the fingertip
+            line = np.asarray([p + t * z for t in np.linspace(0.0, reach, 50)], dtype=np.float32)
+            assert scene.compute_distance(o3d.core.Tensor(line)).numpy().min() < 2e-4, g.id
+            # pad points moved back by the compliance (plus the 1.25 mm gap grid's reach) are outside the part
+            pts = np.asarray([p + a * x + c * z + (s.compliance + 1e-4) * out for a, c in grid], dtype=np.float32)
+            sd = scene.compute_signed_distance(o3d.core.Tensor(pts)).numpy()
+            assert sd.min() > -1e-5, g.id
 
 
 def test_low_bar_feasible_from_above_at_a_pose(bar, hand, bar_grasps, point_arm, table) -> None:
