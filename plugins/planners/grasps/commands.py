@@ -135,7 +135,9 @@ def asmteach_add_commands(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--part", default=None, help="for a structure: a, b or the part's name (default both)")
     p.add_argument("--hand", default="nextage", help="'nextage' or a HandSpec YAML/JSON file")
     p.add_argument("--mu", type=float, default=0.3, help="friction coefficient of the antipodal test")
-    p.add_argument("--pad-min-support", type=float, default=None, help="fraction of each pad on the surface")
+    p.add_argument("--pad-min-support", type=float, default=None,
+                   help="optional share of each pad in contact (default 0: the contact model decides; 1: pads "
+                   "fully on a face)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-cache", action="store_true", help="plan again even when a cached result exists")
     p.set_defaults(func=run_grasps)

@@ -14,9 +14,10 @@ close with ``hand.max_force`` newtons each; gravity is switched on; the palm
 lifts ``lift`` metres in 1 s, then holds for ``hold`` seconds while shaking
 horizontally (``shake_amplitude`` metres at ``shake_hz``). The grasp *holds*
 when the part rose with the palm (at least 80 % of the lift) and both fingers
-still touch it at the end. Bullet multiplies the friction coefficients of
-two touching bodies; the part gets 1.0, so ``friction`` is the pad-part value
-(and the pads' torsional friction follows from it and the pad size).
+still touch it at the end (a contact point, or the finger within 0.5 mm of
+it). Bullet multiplies the friction coefficients of two touching bodies; the
+part gets 1.0, so ``friction`` is the pad-part value (and the pads' torsional
+friction follows from it and the pad size).
 """
 
 from __future__ import annotations

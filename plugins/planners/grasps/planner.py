@@ -3,28 +3,35 @@
 Pipeline (part frame, metres, radians):
 
 1. contact samples: area-weighted surface points plus planar facet centres;
-2. the opposite contact by ray casting through the part along ``-normal``;
+2. the opposite contact by ray casting through the part along ``-normal``:
+   the first exit (across a wall) and, when the ray enters the part again
+   (a tube's bore, a wheel's window), the last exit too (across the part);
 3. jaw opening within the stroke (with approach clearance) and the antipodal
-   friction-cone test (``mu``, default 0.3: a 16.7 deg cone);
+   friction-cone test (``mu``, default 0.3: a 16.7 deg cone); none left: the
+   part has no opposing surfaces;
 4. palm orientations about the grasp axis: ``orientations`` evenly spaced,
    plus, per stable resting pose of the part (the placements the regrasp
    planner uses), the one approaching most steeply from above in that pose;
-5. pads on the surface: a grid of pad points is ray-cast onto the part along
-   the jaw axis; a point is *supported* when the surface lies within
-   ``pad_tolerance`` of the pad plane. No point may meet material in front of
-   the plane (a protrusion), and at least ``pad_min_support`` of each pad must
-   be supported; the rest may overhang an edge or a hole (1.0: pads fully on
-   the surface);
+5. the soft-pad contact model (:mod:`.contact`): each pad is flat with a
+   ``compliance`` deep soft layer; the surface within that depth of the first
+   touch is its contact patch (a patch on a plane, a strip on a cylinder, a
+   disc on a sphere), no point of the part may stand more than ``compliance``
+   in front of the pad plane through the planned contact (a protrusion), and
+   the two patches must bear ``hold_safety`` times the part's weight and its
+   moment about the grasp axis (soft-finger limit surface: friction ``mu``,
+   ``hand.max_force`` per pad, each patch's torsion radius). Optionally
+   ``pad_min_support`` of each pad must be in contact (1.0: pads fully on a
+   face); by default line and point contacts on curved parts are accepted;
 6. set-backs: besides the pads centred on the contacts, every orientation is
    also offered with the TCP moved back along its approach axis (-z) as far
-   as both pads stay supported, at most half a pad length (so the sampled
-   contacts stay under the pads). Such a *shallow* grasp holds the part near
-   the fingertip end of the pads, and the fingertips reach that much less past
+   as the contact model still holds, at most until the contacts are
+   ``edge_margin`` from the pads' fingertip edge. Such a *shallow* grasp holds
+   the part near the fingertip end of the pads, and the fingertips reach that much less past
    the contacts: a side grasp from above with centred pads puts the fingertips
    (half a pad length past the TCP) into the table whenever the contacts are
    lower than that, which is most side faces of a part lying on the table;
 7. quality score from the grasp axis' distance to the centre of mass, the
-   normals' alignment with the axis and the pads' contact area;
+   normals' alignment with the axis and the contact patches' torsion radius;
 8. selection, round robin over buckets, one kept grasp per bucket and round
    until ``max_grasps`` are kept: near-duplicates dropped, then hand (palm,
    fingers and their approach sweep, the hand fully open on its way in as the
@@ -43,6 +50,10 @@ A shallow grasp's ``p0``, ``p1`` are the pad centres on the two contact planes
 (the TCP is their midpoint, as :class:`~asmteach.core.models.Grasp` has it);
 they may lie past the part's edge by up to half a pad length, and the sampled
 contacts lie under the pads.
+
+When no grasp is left, :class:`UserError` says why in one line: too small,
+a thin shell, too wide (its smallest width against the stroke), no opposing
+surfaces, no surface the pads can press, too heavy, or the hand collides.
 
 Results are cached on disk per part mesh hash, centre of mass, settings, hand
 and seed (``~/.cache/asmteach/grasps`` or ``$ASMTEACH_CACHE_DIR``).

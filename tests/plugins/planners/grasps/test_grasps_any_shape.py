@@ -165,3 +165,12 @@ def test_cone_has_no_opposing_surfaces(hand) -> None:
 def test_too_small_part(hand) -> None:
     with pytest.raises(UserError, match=r"too small: at most 1\.\d\d mm across.*under the 2\.00 mm"):
         _planner().plan(_part(trimesh.creation.icosphere(subdivisions=2, radius=0.00075), "bead"), hand)
+
+
+def test_too_heavy_part(hand) -> None:
+    """A 40 mm cube of 2 kg: 2 x 0.3 x 40 N of friction bears 24 N, under 1.5 x 19.6 N."""
+    cube = trimesh.creation.box([0.04, 0.04, 0.04])
+    with pytest.raises(UserError, match=r"too heavy for the hand: 2 kg"):
+        _planner().plan(_part(cube, "anvil", density=2.0 / cube.volume), hand)
+    # with the check off (hold_safety 0) it is planned
+    assert _planner(hold_safety=0.0, max_grasps=20).plan(_part(cube, "anvil", density=2.0 / cube.volume), hand)
