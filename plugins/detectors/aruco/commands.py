@@ -125,24 +125,56 @@ def _cmd_render_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from asmteach.plugins.detectors.aruco.calibrate import BoardSpec, calibrate_charuco
+    from asmteach.plugins.detectors.aruco.calibrate import (
+        BoardSpec,
+        ChessboardSpec,
+        calibrate_charuco,
+        calibrate_chessboard,
+        draw_coverage,
+    )
     from asmteach.plugins.detectors.aruco.camera import save_camera
-    from asmteach.plugins.detectors.aruco.frames import load_frames
+    from asmteach.plugins.detectors.aruco.frames import load_named_frames
 
+    board = args.board.lower()
     try:
-        sx, sy = (int(v) for v in args.board.lower().split("x"))
-        spec = BoardSpec(squares_x=sx, squares_y=sy, square=args.square, marker=args.marker,
-                         dictionary=args.dictionary)
+        if board == "chessboard":
+            if args.cols is None or args.rows is None:
+                raise UserError("--board chessboard needs --cols and --rows (inner corners, e.g. --cols 9 --rows 6)")
+            chess = ChessboardSpec(cols=args.cols, rows=args.rows, square=args.square)
+        else:
+            if args.cols is not None or args.rows is not None:
+                raise UserError("--cols/--rows are for --board chessboard; a ChArUco board is --board NxM squares")
+            sx, sy = (int(v) for v in board.split("x"))
+            spec = BoardSpec(squares_x=sx, squares_y=sy, square=args.square, marker=args.marker,
+                             dictionary=args.dictionary)
     except ValueError as exc:
-        msg = format_validation_error(exc) if isinstance(exc, ValidationError) else "give --board as NxM, e.g. 7x5"
-        raise UserError(f"--board/--square/--marker: {msg}") from None
-    res = calibrate_charuco(load_frames(args.images), spec)
-    save_camera(args.out, res.camera, name="charuco-calibration",
-                notes=f"RMS {res.rms_px:.3f} px over {res.images_used}/{res.images_total} images")
+        msg = (format_validation_error(exc) if isinstance(exc, ValidationError)
+               else "give --board as NxM ChArUco squares (e.g. 7x5) or chessboard")
+        raise UserError(f"--board/--cols/--rows/--square/--marker: {msg}") from None
+    named = load_named_frames(args.images)
+    names, images = [n for n, _ in named], [img for _, img in named]
+    if board == "chessboard":
+        res = calibrate_chessboard(images, chess, names=names, model=args.model, fix_aspect=args.fix_aspect)
+        kind = "chessboard"
+    else:
+        res = calibrate_charuco(images, spec, names=names, model=args.model, fix_aspect=args.fix_aspect)
+        kind = "charuco"
+    for name in res.skipped:
+        print(f"{name}: board not found, skipped")
+    save_camera(args.out, res.camera, name=f"{kind}-calibration",
+                notes=f"RMS {res.rms_px:.3f} px over {res.images_used}/{res.images_total} images; {res.model}")
     K = res.camera.K
     print(f"calibrated from {res.images_used}/{res.images_total} image(s): RMS {res.rms_px:.3f} px")
+    print(f"  model: {res.model}")
     print(f"  fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} cx {K[0, 2]:.2f} cy {K[1, 2]:.2f}; dist "
           f"{np.round(res.camera.dist, 4).tolist()}")
+    print("  per-view RMS (px): " + ", ".join(f"{n} {e:.3f}" for n, e in zip(res.used, res.per_view_px, strict=True)))
+    coverage = Path(args.coverage) if args.coverage else Path(args.out).with_name(Path(args.out).stem + "_coverage.png")
+    canvas, frac = draw_coverage(res)
+    with atomic_path(coverage) as tmp:
+        if not cv2.imwrite(str(tmp), canvas):
+            raise UserError(f"{coverage}: cannot write the coverage picture (give a .png path)")
+    print(f"  corner coverage: {frac:.0%} of an 8x6 grid over the image; picture {coverage}")
     print(f"  wrote {args.out}")
     return 0
 
@@ -162,11 +194,20 @@ def asmteach_add_commands(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="output folder for frames, camera.yaml, ground_truth.json")
     p.set_defaults(func=_cmd_render_demo)
 
-    p = subparsers.add_parser("calibrate", help="camera intrinsics from ChArUco board images")
+    p = subparsers.add_parser("calibrate", help="camera intrinsics from ChArUco or chessboard photos")
     p.add_argument("--images", required=True, help="folder of board images (or a video)")
     p.add_argument("--out", required=True, help="camera YAML to write")
-    p.add_argument("--board", default="7x5", help="squares along x and y, e.g. 7x5")
+    p.add_argument("--board", default="7x5",
+                   help="ChArUco squares along x and y (e.g. 7x5), or 'chessboard' (then give --cols and --rows)")
+    p.add_argument("--cols", type=int, default=None, help="chessboard inner corners along x, e.g. 9")
+    p.add_argument("--rows", type=int, default=None, help="chessboard inner corners along y, e.g. 6")
     p.add_argument("--square", type=float, default=0.04, help="square side, metres")
-    p.add_argument("--marker", type=float, default=0.03, help="marker side, metres")
-    p.add_argument("--dictionary", default="DICT_5X5_100", help="ArUco dictionary of the board")
+    p.add_argument("--marker", type=float, default=0.03, help="ChArUco marker side, metres")
+    p.add_argument("--dictionary", default="DICT_5X5_100", help="ArUco dictionary of a ChArUco board")
+    p.add_argument("--model", default="k1k2p1p2k3", choices=["k1k2p1p2k3", "k1k2p1p2"],
+                   help="distortion coefficients estimated (k1k2p1p2 holds k3 at 0)")
+    p.add_argument("--fix-aspect", action="store_true",
+                   help="estimate one focal length, fx = fy (OpenCV's CALIB_FIX_ASPECT_RATIO with aspect 1)")
+    p.add_argument("--coverage", default=None,
+                   help="PNG of all views' corners over the image (default: <out stem>_coverage.png beside --out)")
     p.set_defaults(func=_cmd_calibrate)
