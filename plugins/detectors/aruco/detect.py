@@ -37,7 +37,13 @@ class MarkerDetector:
         refine: RefineMethod = "edges",
         refine_window: int = 5,
         min_perimeter_rate: float = 0.01,
+        edge_max_line_rms: float = 0.25,
+        edge_min_inliers: float = 0.85,
     ) -> None:
+        # The edge-fit acceptance limits (see :func:`refine_corners_edges`): the defaults suit clean renders;
+        # a real JPEG's noise and in-camera sharpening halos need looser ones (docs/results/real_sensor_data.md).
+        self.edge_max_line_rms = float(edge_max_line_rms)
+        self.edge_min_inliers = float(edge_min_inliers)
         self.refine = refine
         self.cells: dict[str, int] = {}
         self.detectors: dict[str, cv2.aruco.ArucoDetector] = {}
@@ -70,7 +76,9 @@ class MarkerDetector:
                     continue
                 corners_px = np.asarray(c, dtype=np.float64).reshape(4, 2)
                 if grey_f is not None:
-                    refined = refine_corners_edges(grey_f, corners_px, self.cells[name])
+                    refined = refine_corners_edges(grey_f, corners_px, self.cells[name],
+                                                   min_inliers=self.edge_min_inliers,
+                                                   max_line_rms=self.edge_max_line_rms)
                     if refined is None:
                         continue  # partly occluded: its corners cannot be trusted
                     corners_px = refined

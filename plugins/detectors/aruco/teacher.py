@@ -51,6 +51,11 @@ class ArucoTeacherSettings(StrictModel):
     """Settings of the ``aruco`` teacher (lengths in metres, angles in degrees, errors in pixels)."""
 
     corner_refinement: RefineMethod = Field("edges", description="edges: line fits to the marker's outer edges")
+    edge_max_line_rms: float = Field(0.25, gt=0, description="edges: a marker side whose edge points scatter more "
+                                     "than this (pixels RMS) about its line is not trusted (marker dropped)")
+    edge_min_inliers: float = Field(0.85, gt=0, le=1, description="edges: fraction of a side's edge profiles that "
+                                    "must be clean steps; real JPEGs (noise, sharpening halos) need about 0.35 px "
+                                    "and 0.6")
     marker_reject_px: float = Field(1.0, gt=0, description="drop a marker whose RMS reprojection error exceeds this")
     frame_reject_px: float = Field(1.0, gt=0, description="drop a frame whose RMS reprojection error exceeds this")
     min_frames: int = Field(3, ge=1, description="assembled frames needed (both parts seen)")
@@ -110,7 +115,9 @@ class ArucoTeacher(Teacher):
     def observe(self, frames: Sequence[np.ndarray], camera: CameraIntrinsics, task: AssemblyTask) -> list[FrameResult]:
         """Detect markers and solve each part's pose in every frame."""
         table = marker_table(task.part_a, task.part_b)
-        det = MarkerDetector({k[0] for k in table}, refine=self.settings.corner_refinement)
+        det = MarkerDetector({k[0] for k in table}, refine=self.settings.corner_refinement,
+                             edge_max_line_rms=self.settings.edge_max_line_rms,
+                             edge_min_inliers=self.settings.edge_min_inliers)
         K, dist = camera.K, camera.dist_array
         results: list[FrameResult] = []
         prior: dict[str, np.ndarray | None] = {"A": None, "B": None}
