@@ -11,12 +11,18 @@ import pytest
 REAL_DATA = Path(__file__).resolve().parents[4] / ".." / "shared" / "data"
 
 
-@pytest.fixture(scope="session")
-def real_data() -> Path:
-    """The shared real-data folder; skipped when absent, but a failure when ``CI`` is set (CI provides it)."""
-    if not (REAL_DATA / "real").is_dir():
-        reason = f"real sensor data not found at {REAL_DATA.resolve()} (clone shared/ beside the repository)"
+def require_real_data(folder: Path) -> Path:
+    """``folder`` resolved if it holds ``real/``; otherwise skip the test, or fail it when ``CI`` is set
+    (CI clones ``shared/`` beside the repository: a missing folder there is a broken setup, not a reason)."""
+    if not (folder / "real").is_dir():
+        reason = f"real sensor data not found at {folder.resolve()} (clone shared/ beside the repository)"
         if os.environ.get("CI"):
             pytest.fail(reason + "; CI must provide it")
         pytest.skip(reason)
-    return REAL_DATA.resolve()
+    return folder.resolve()
+
+
+@pytest.fixture(scope="session")
+def real_data() -> Path:
+    """The shared real-data folder (see :func:`require_real_data` for the skip/fail rule)."""
+    return require_real_data(REAL_DATA)

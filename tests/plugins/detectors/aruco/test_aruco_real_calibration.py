@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 from pathlib import Path
 
 import cv2
@@ -62,3 +63,20 @@ def test_unreadable_board_photos_are_named_and_none_is_an_error(real_data: Path,
     argv[argv.index("6")] = "7"
     assert main(argv) == 2
     assert "chessboard 9x7 inner corners" in capsys.readouterr().err
+
+
+def test_missing_real_data_skips_locally_and_fails_under_ci(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    spec = importlib.util.spec_from_file_location("aruco_conftest", Path(__file__).with_name("conftest.py"))
+    assert spec is not None and spec.loader is not None
+    conftest = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(conftest)
+    require_real_data = conftest.require_real_data
+
+    monkeypatch.delenv("CI", raising=False)
+    with pytest.raises(pytest.skip.Exception, match="real sensor data not found"):
+        require_real_data(tmp_path / "absent")
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match="CI must provide it"):
+        require_real_data(tmp_path / "absent")
+    (tmp_path / "here" / "real").mkdir(parents=True)
+    assert require_real_data(tmp_path / "here") == (tmp_path / "here").resolve()
