@@ -54,8 +54,8 @@ class ArucoTeacherSettings(StrictModel):
     edge_max_line_rms: float = Field(0.25, gt=0, description="edges: a marker side whose edge points scatter more "
                                      "than this (pixels RMS) about its line is not trusted (marker dropped)")
     edge_min_inliers: float = Field(0.85, gt=0, le=1, description="edges: fraction of a side's edge profiles that "
-                                    "must be clean steps; real JPEGs (noise, sharpening halos) need about 0.35 px "
-                                    "and 0.6")
+                                    "must be clean steps; real JPEGs (noise, dark halos at edges) needed 0.35 px "
+                                    "and 0.6 (docs/results/real_sensor_data.md)")
     marker_reject_px: float = Field(1.0, gt=0, description="drop a marker whose RMS reprojection error exceeds this")
     frame_reject_px: float = Field(1.0, gt=0, description="drop a frame whose RMS reprojection error exceeds this")
     min_frames: int = Field(3, ge=1, description="assembled frames needed (both parts seen)")
