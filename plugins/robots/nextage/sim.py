@@ -28,8 +28,7 @@ import pybullet
 from pybullet_utils import bullet_client
 
 from asmteach.core import geometry
-from asmteach.core.convex_pieces import convex_pieces, pieces_obj
-from asmteach.core.cstdout import silenced_c_stdout
+from asmteach.core.convex_pieces import decompose
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
 
@@ -179,32 +178,19 @@ class PyBulletWorld:
             self.spawn_part(name, part, T)
 
     def _collision_shape(self, part: PartModel) -> int:
-        mesh = part.mesh
-        if part.spec.solid is not None:
-            # Exact convex pieces: V-HACD fills sub-millimetre clearances and inflates faces.
-            # PyBullet makes one convex hull per object of an OBJ file, as it does for V-HACD's output.
-            key = f"{part.source_hash or id(mesh)}_exact"
-            if key not in self._shape_files:
-                # shared by every world of the process (plan re-checks make many); only content-hashed parts
-                text = _EXACT_OBJ.get(part.source_hash) or pieces_obj(convex_pieces(part.spec.solid))
-                if part.source_hash:
-                    _EXACT_OBJ[part.source_hash] = text
-                out = Path(self._tmp.name) / f"{key}.obj"
-                out.write_text(text)
-                self._shape_files[key] = str(out)
-            return self.p.createCollisionShape(pybullet.GEOM_MESH, fileName=self._shape_files[key])
-        if mesh.is_convex:
-            return self.p.createCollisionShape(pybullet.GEOM_MESH, vertices=np.asarray(mesh.vertices).tolist())
-        key = part.source_hash or str(id(mesh))
+        # One convex decomposition for every part (asmteach.core.convex_pieces): exact pieces for parametric
+        # solids and CAD meshes, CoACD only where an exact split would need too many pieces. V-HACD, used
+        # here before, filled sub-millimetre clearances and grew faces by up to a millimetre.
+        key = f"{part.source_hash or id(part.mesh)}_pieces"
         if key not in self._shape_files:
-            src = Path(self._tmp.name) / f"{key}.obj"
-            out = Path(self._tmp.name) / f"{key}_vhacd.obj"
-            mesh.export(src)
-            # Small parts need a fine voxel grid to keep holes and slots open.
-            with silenced_c_stdout():  # V-HACD prints progress on the C stdout
-                self.p.vhacd(str(src), str(out), str(Path(self._tmp.name) / "vhacd.log"), resolution=200000,
-                             concavity=0.0005, maxNumVerticesPerCH=64, minVolumePerCH=1e-7)
+            # shared by every world of the process (plan re-checks make many); only content-hashed parts
+            text = _EXACT_OBJ.get(part.source_hash) or decompose(part).obj()
+            if part.source_hash:
+                _EXACT_OBJ[part.source_hash] = text
+            out = Path(self._tmp.name) / f"{key}.obj"
+            out.write_text(text)
             self._shape_files[key] = str(out)
+        # PyBullet makes one convex hull per object of an OBJ file: a compound of the pieces
         return self.p.createCollisionShape(pybullet.GEOM_MESH, fileName=self._shape_files[key])
 
     def spawn_part(self, name: str, part: PartModel, T_world_part: np.ndarray) -> int:

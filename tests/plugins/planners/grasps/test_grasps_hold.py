@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
-from asmteach.plugins.planners.grasps.convex import convex_pieces, split_convex
 from asmteach.plugins.planners.grasps.hold_check import HoldSimulator
 from asmteach.plugins.planners.grasps.planner import AntipodalGraspPlanner
 
@@ -27,22 +25,3 @@ def test_block_holds_and_slippery_heavy_block_drops(block, hand) -> None:
     finally:
         block.mass = saved
     assert not r.held and r.reason == "dropped" and r.lift < 0.05
-
-
-def test_convex_pieces_of_a_cut_block(make_box) -> None:
-    from asmteach.core.models import Primitive
-
-    part = make_box(
-        [0.08, 0.04, 0.04],
-        name="stepped",
-        subtract=[Primitive(shape="box", size=[0.041, 0.05, 0.021], pose={"xyz": [0.0205, 0, 0.0405]})],
-    )
-    pieces, approx = split_convex(part.mesh)
-    assert approx == 0 and len(pieces) == 2
-    assert sum(p.volume for p in pieces) == pytest.approx(part.mesh.volume, rel=1e-6)
-    for p in pieces:
-        assert p.convex_hull.volume == pytest.approx(p.volume, rel=1e-6)
-    # a union of primitives is split into its (convex) primitives
-    union = make_box([0.04, 0.04, 0.04], name="cube")
-    (piece,) = convex_pieces(union)
-    np.testing.assert_allclose(piece.bounds, union.mesh.bounds, atol=1e-9)
