@@ -7,9 +7,14 @@ z up, the table below the part. ``detection.json`` holds ``found``,
 ``reason``, ``rough`` and ``corrected`` (``T_world_part`` 4x4 metres,
 ``xyz_mm``, ``rpy_deg``), ``fitness``, ``inlier_rmse`` and ``timing_ms`` per
 stage; ``timing_ms.total`` is the detection proper (detector + corrector),
-without start-up, file loading or the view-database build. ``--viewpoint X Y Z``
-gives the camera centre (world frame, metres) to the detector and the
-corrector; without it the detector's ``viewpoint`` setting is used.
+without start-up, file loading or the view-database build.
+
+The camera centre (world frame, metres; the detector and the corrector need
+it) comes from, in this order: ``--viewpoint X Y Z``; the cloud file (a PCD's
+``VIEWPOINT`` header, the ``comment viewpoint X Y Z`` line of a PLY written by
+asmteach's renderer); a run config (the detector's ``viewpoint`` setting, else
+the robot's camera mount). With none of them the command stops (exit 2) and
+says which to give: there is no default camera.
 
 Exit codes: 0 found, 1 not found (the JSON says why), 2 bad input (one line).
 """
@@ -34,6 +39,8 @@ from asmteach.core.interfaces import Corrector, Detector, PartModel
 from asmteach.core.io import read_yaml, write_json
 from asmteach.core.models import Detection, TablePlane
 from asmteach.core.parts import load_parts
+from asmteach.plugins.detectors.cvfh.detector import NO_VIEWPOINT
+from asmteach.plugins.detectors.depth_camera import read_viewpoint
 
 import open3d as o3d  # isort: skip
 
@@ -63,7 +70,7 @@ def asmteach_add_commands(subparsers: argparse._SubParsersAction) -> None:
         type=float,
         nargs=3,
         metavar=("X", "Y", "Z"),
-        help="camera centre, world frame, metres (default: the detector's viewpoint setting)",
+        help="camera centre, world frame, metres (default: the cloud file's header, else the config's camera)",
     )
     p.add_argument("--table-height", type=float, default=None, help="known table top z (metres); else fitted")
     p.add_argument("--units", choices=["m", "mm"], default="m", help="units of a mesh file given directly")
@@ -72,7 +79,7 @@ def asmteach_add_commands(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _cmd_detect(args: argparse.Namespace) -> int:
-    part, det_choice, cor_choice, seed, table = _load_source(args)
+    part, det_choice, cor_choice, seed, table, config_eye = _load_source(args)
     if args.detector:
         det_choice = (args.detector, {})
     if args.corrector:
@@ -88,11 +95,11 @@ def _cmd_detect(args: argparse.Namespace) -> int:
     if args.table_height is not None:
         table = TablePlane(height=args.table_height)
     cloud = load_cloud(Path(args.cloud))
+    viewpoint = choose_viewpoint(args.viewpoint, Path(args.cloud), config_eye, det_choice[1].get("viewpoint"))
 
     t0 = time.perf_counter()
     detector.prepare(part)  # the view-database build is not detection time
     prep_ms = 1000.0 * (time.perf_counter() - t0)
-    viewpoint = None if args.viewpoint is None else np.asarray(args.viewpoint, dtype=float)
     detection = run_detection(detector, corrector, cloud, part, table, viewpoint=viewpoint)
     report = detection_report(detection)
     report["timing_ms_excluded"] = {"prepare": round(prep_ms, 1)}
@@ -110,6 +117,31 @@ def _cmd_detect(args: argparse.Namespace) -> int:
     return 1
 
 
+def choose_viewpoint(
+    given: list[float] | None, cloud: Path, config_eye: np.ndarray | None, setting: object = None
+) -> np.ndarray:
+    """The camera centre ((3,), world frame, metres) for ``asmteach detect``: the user's, the file's, the config's.
+
+    ``given`` is ``--viewpoint``; ``cloud`` the cloud file (its header, see
+    :func:`read_viewpoint`); ``config_eye`` the run config's camera; ``setting``
+    the detector's own ``viewpoint`` setting from the config, which wins over
+    the robot's camera. :class:`UserError` when none gives one.
+    """
+    if given is not None:
+        return np.asarray(given, dtype=float)
+    try:
+        from_file = read_viewpoint(cloud)
+    except ValueError as exc:
+        raise UserError(f"--cloud: {exc}; fix the line or give --viewpoint X Y Z") from None
+    if from_file is not None:
+        return from_file
+    if setting is not None:
+        return np.asarray(setting, dtype=float)
+    if config_eye is not None:
+        return config_eye
+    raise UserError(f"{cloud.name}: {NO_VIEWPOINT}")
+
+
 def run_detection(
     detector: Detector,
     corrector: Corrector | None,
@@ -122,8 +154,8 @@ def run_detection(
     """Detect, then correct the rough pose (when a corrector is given); timings include the correction.
 
     ``viewpoint`` ((3,), world frame, metres) is the camera centre, or ``None``
-    for the detector's own setting. The corrector gets the viewpoint the
-    detector used (``details["viewpoint"]``) when its ``correct`` takes one.
+    for the detector's own setting (a detector without one raises :class:`UserError`).
+    The corrector gets the viewpoint the detector used (``details["viewpoint"]``) when its ``correct`` takes one.
     """
     det = detector.detect(cloud, part, table, viewpoint=viewpoint)
     if not det.found or corrector is None or det.rough is None:
@@ -211,13 +243,16 @@ def load_cloud(path: Path) -> np.ndarray:
     return pts.reshape(-1, 3)
 
 
-def _load_source(args: argparse.Namespace) -> tuple[PartModel, tuple[str, dict], tuple[str, dict] | None, int, Any]:
-    """Part, detector choice, corrector choice, seed and table from MESH_OR_CONFIG."""
+def _load_source(
+    args: argparse.Namespace,
+) -> tuple[PartModel, tuple[str, dict], tuple[str, dict] | None, int, Any, np.ndarray | None]:
+    """Part, detector choice, corrector choice, seed, table and camera centre (run config only) from MESH_OR_CONFIG."""
     src = Path(args.source)
     det: tuple[str, dict] = ("cvfh_icp", {})
     cor: tuple[str, dict] | None = ("stable_placements", {})
     seed = 0
     table = None
+    eye = None
     if not src.is_file():
         raise UserError(f"{src}: no such file")
     raw = read_yaml(src) if src.suffix.lower() in {".yaml", ".yml"} else None
@@ -228,10 +263,28 @@ def _load_source(args: argparse.Namespace) -> tuple[PartModel, tuple[str, dict],
         cor = (cfg.corrector.plugin, cfg.corrector.settings) if cfg.corrector else None
         seed = cfg.seed
         table = TablePlane(height=cfg.table.height)
+        eye = _robot_camera(cfg.robot.plugin, cfg.robot.settings, cfg.table.height)
     elif raw is not None and not isinstance(raw, dict):
         raise UserError(f"{src}: expected a YAML mapping (a part, a structure or a run config)")
     else:
         part = load_parts(src, units=args.units, select=args.part)[0]
     if args.seed is not None:
         seed = args.seed
-    return part, det, cor, seed, table
+    return part, det, cor, seed, table, eye
+
+
+def _robot_camera(plugin: str, settings: dict[str, Any], table_height: float) -> np.ndarray | None:
+    """Camera centre (world, metres) of a run config's robot: its settings' ``camera.eye``, z above the table top.
+
+    That is how the simulated robots mount their depth camera (``camera_pose``
+    looks from ``eye`` lifted by the table height); a robot without such a
+    setting gives ``None``.
+    """
+    try:
+        robot_settings = registry.get_class("robots", plugin).Settings.model_validate(settings)
+    except (UserError, ValueError):  # load_run_config validated it already; this is only a lookup
+        return None
+    eye = getattr(getattr(robot_settings, "camera", None), "eye", None)
+    if eye is None:
+        return None
+    return np.asarray(eye, dtype=float) + np.array([0.0, 0.0, table_height])

@@ -7,14 +7,16 @@ Pipeline (paper, "Rough detection using point cloud"), all in the world frame
    what stands on it (DBSCAN; pieces a self-occlusion split apart are merged
    while the union fits the part); clusters too big for the part are skipped;
 2. describe each cluster in a virtual camera frame at the viewpoint (the
-   ``viewpoint`` argument of :meth:`detect`, else the setting) looking
+   ``viewpoint`` argument of :meth:`detect`, else the setting; there is no
+   default camera, :class:`UserError` without one) looking
    at the cluster (CVFH regions + CRH), match its regions against the 42-view
    database (k nearest views), and turn every (view, CRH roll peak) pair into
    a pose hypothesis;
 3. pre-score hypotheses by the share of cluster points near the model and
    whether they rest on the table, refine the best with point-to-plane ICP
    (coarse on a subsample for ten, fine for the best four), and verify them
-   (fitness, inlier RMSE, free-space violations, support on the table); the
+   (fitness, inlier RMSE, free-space violations, the model surface the
+   camera should see, support on the table: :func:`~.refine.verify`); the
    best verified one is the rough pose. When none verifies, the next ten
    hypotheses get their turn (``max_rounds``);
 4. when no CVFH hypothesis verifies, the part's stable rests on the table at
@@ -24,7 +26,14 @@ Pipeline (paper, "Rough detection using point cloud"), all in the world frame
 5. the verified pose is tried again turned by each *hull twin* (a rotation
    keeping the convex hull, not the part); the pose the observed points
    favour wins, and twins the view cannot tell apart are listed in
-   ``details["ambiguous"]``.
+   ``details["ambiguous"]``;
+6. the pose is tried again turned by each *near twin* (a turn that keeps the
+   part's surface within ``near_twin_tol``, e.g. a keyed peg about its axis)
+   and by small nudges (``nudge_deg``); the best-scoring verified pose wins,
+   and when a distinct one (beyond the part's symmetries, ``distinct_mm`` /
+   ``distinct_deg``) scores within ``ambiguity_margin`` and the ray evidence
+   does not rule it out, the view cannot tell them apart: ``found: false``
+   with the reason ("ambiguous: ...").
 
 Nothing verified means ``found: false`` with the reason of the closest miss;
 a wrong pose is never reported as found.
@@ -32,8 +41,9 @@ a wrong pose is never reported as found.
 
 from __future__ import annotations
 
+import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from pydantic import Field
@@ -42,8 +52,15 @@ from asmteach.core import geometry
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Detector, PartModel
 from asmteach.core.models import Detection, StrictModel, TablePlane, Vec3
+from asmteach.core.symmetry import part_symmetries
 from asmteach.plugins.detectors.cvfh.refine import ModelCloud, RefineSettings, Verdict, icp_refine, model_cloud, verify
-from asmteach.plugins.detectors.cvfh.resting import disagreement, hull_twins, resting_hypotheses, stable_rests
+from asmteach.plugins.detectors.cvfh.resting import (
+    disagreement,
+    hull_twins,
+    near_twins,
+    resting_hypotheses,
+    stable_rests,
+)
 from asmteach.plugins.detectors.cvfh.segment import (
     SegmentSettings,
     check_cloud,
@@ -61,19 +78,28 @@ from asmteach.plugins.detectors.cvfh.views import (
 )
 from asmteach.plugins.detectors.depth_camera import KinectSettings, look_at
 
-__all__ = ["DEFAULT_VIEWPOINT", "CvfhIcpDetector", "StageClock", "resolve_viewpoint"]
+__all__ = ["NO_VIEWPOINT", "CvfhIcpDetector", "StageClock", "resolve_viewpoint"]
 
-DEFAULT_VIEWPOINT = (-0.05, 0.0, 0.70)
-"""Where the scene Kinect of asmteach's table set-up sits (world, metres)."""
+NO_VIEWPOINT = (
+    "no camera position: give --viewpoint X Y Z (camera centre, world frame, metres), a PCD whose VIEWPOINT "
+    "header holds it, a PLY written by asmteach's renderer ('comment viewpoint X Y Z'), or the detector's "
+    "viewpoint setting in the config"
+)
+"""The :class:`UserError` message when no source gives the camera centre."""
 
 
-def resolve_viewpoint(viewpoint: np.ndarray | None, default: np.ndarray) -> np.ndarray:
-    """The camera centre to use (world frame, metres): ``viewpoint`` when given, else ``default``.
+def resolve_viewpoint(viewpoint: np.ndarray | None, setting: np.ndarray | None) -> np.ndarray:
+    """The camera centre to use (world frame, metres): ``viewpoint`` when given, else the ``setting``.
 
-    Raises :class:`UserError` for anything but three finite numbers, or for a
-    camera farther than 20 m from the world origin (a viewpoint in millimetres).
+    There is no built-in default: the viewpoint orients the descriptors and
+    casts the verification's rays, and a guessed camera makes every right
+    pose look wrong. Raises :class:`UserError` when neither is given, for
+    anything but three finite numbers, or for a camera farther than 20 m from
+    the world origin (a viewpoint in millimetres).
     """
-    eye = np.asarray(default if viewpoint is None else viewpoint, dtype=float)
+    if viewpoint is None and setting is None:
+        raise UserError(NO_VIEWPOINT)
+    eye = np.asarray(setting if viewpoint is None else viewpoint, dtype=float)
     if eye.shape != (3,) or not np.all(np.isfinite(eye)):
         raise UserError(f"viewpoint must be 3 finite numbers (camera centre, world frame, metres), got {eye.tolist()}")
     if float(np.linalg.norm(eye)) > 20.0:
@@ -86,9 +112,10 @@ def resolve_viewpoint(viewpoint: np.ndarray | None, default: np.ndarray) -> np.n
 class CvfhSettings(StrictModel):
     """Settings of the ``cvfh_icp`` detector."""
 
-    viewpoint: Vec3 = Field(
-        default_factory=lambda: np.array(DEFAULT_VIEWPOINT),
-        description="camera centre in the world frame, metres (the CVFH viewpoint component needs it)",
+    viewpoint: Vec3 | None = Field(
+        None,
+        description="camera centre in the world frame, metres, when detect() is not given one (the CVFH "
+        "viewpoint component and the verification's rays need it); no default: a wrong camera rejects every pose",
     )
     segment: SegmentSettings = Field(default_factory=SegmentSettings)
     descriptors: DescriptorSettings = Field(default_factory=DescriptorSettings)
@@ -121,6 +148,24 @@ class CvfhSettings(StrictModel):
         4.0, ge=1.0, description="the evidence against the loser must exceed that against the winner this many times"
     )
     size_slack: float = Field(1.25, ge=1.0, description="a cluster wider than this times the part's is skipped")
+    near_twin_tol: float = Field(
+        0.002, ge=0.0,
+        description="a turn keeping the part's surface within this mean distance (metres) of itself is a near twin "
+        "whose pose must score clearly worse than the found one (0: no near-twin check)",
+    )
+    ambiguity_margin: float = Field(
+        0.02, ge=0.0,
+        description="a distinct verified pose scoring within this of the best makes the view ambiguous: found "
+        "false (measured on 49 corpus parts: wrong near-twin poses score within 0.007 of the right one, views that "
+        "tell them apart put the right one ahead by >= 0.026)",
+    )
+    nudge_deg: float = Field(
+        10.0, ge=0.0, description="the found pose is also tried turned by this about each principal axis (0: not)"
+    )
+    near_fit: float = Field(0.003, gt=0.0, description="near twins: a pose explains a point within this along its ray")
+    near_off: float = Field(0.006, gt=0.0, description="near twins: a pose clearly fails a point beyond this")
+    distinct_mm: float = Field(5.0, gt=0.0, description="poses farther apart than this (mm) are distinct")
+    distinct_deg: float = Field(5.0, gt=0.0, description="poses turned further apart than this (deg) are distinct")
 
 
 class StageClock:
@@ -162,6 +207,10 @@ class _Prepared:
     """(k, 4, 4) stable rests on z = 0 (see :func:`stable_rests`)."""
     twins: list[np.ndarray]
     """Part-frame rotations keeping the convex hull but not the part (see :func:`hull_twins`)."""
+    near: list[np.ndarray]
+    """Part-frame rotations keeping the part nearly (see :func:`near_twins`)."""
+    own: list[np.ndarray]
+    """The part's own symmetries (poses that differ by one are the same pose)."""
 
 
 @dataclass
@@ -210,7 +259,17 @@ class CvfhIcpDetector(Detector):
         com = np.asarray(part.center_of_mass, float)
         rests = stable_rests(part.mesh, com, s.resting_poses) if s.resting_poses else np.zeros((0, 4, 4))
         twins = hull_twins(part.mesh, com)
-        prep = _Prepared(model, db, diameter, built, 1000.0 * (time.perf_counter() - t0), rests, twins)
+        near = near_twins(part.mesh, com, s.near_twin_tol) if s.near_twin_tol > 0 else []
+        if s.nudge_deg > 0:
+            # Small turns about the principal axes: a pose ICP left a few degrees off (a smooth free-form part)
+            # is pulled to the right one, or shows the view does not pin it down.
+            F = np.array(part.mesh.principal_inertia_vectors, dtype=float)
+            for axis in F:
+                for a in (-s.nudge_deg, s.nudge_deg):
+                    R = geometry.from_rotvec(np.radians(a) * axis / np.linalg.norm(axis))[:3, :3]
+                    near.append(geometry.from_rotation(R, com - R @ com))
+        own = part_symmetries(part.mesh, com)
+        prep = _Prepared(model, db, diameter, built, 1000.0 * (time.perf_counter() - t0), rests, twins, near, own)
         self._prepared[key] = prep
         return prep
 
@@ -225,7 +284,7 @@ class CvfhIcpDetector(Detector):
         """Find ``part`` in ``cloud`` ((n, 3) world frame, metres); see the module docstring.
 
         ``viewpoint`` is the camera centre ((3,), world frame, metres); ``None``
-        uses the ``viewpoint`` setting. It orients the virtual camera the
+        uses the ``viewpoint`` setting, and :class:`UserError` without either. It orients the virtual camera the
         descriptors are computed in (CVFH's viewpoint component, CRH's roll)
         and casts the rays of the free-space check; ``details["viewpoint"]``
         reports the one used.
@@ -350,6 +409,15 @@ class CvfhIcpDetector(Detector):
             best, info["twins"], ambiguous = self._twins(best, job, prep, clock)
             if ambiguous:
                 info["ambiguous"] = ambiguous
+        if best is not None and prep.near:
+            best, rival = self._near_twins(best, job, prep, clock)
+            if rival is not None:
+                # The view cannot tell two distinct poses apart: reporting either would be a guess.
+                mm, deg = self._apart(best.T_world_part, rival.T_world_part, prep.own)
+                why = (f"ambiguous: a pose {mm:.0f} mm and {deg:.0f} deg away explains the view as well (score "
+                       f"{rival.score:.3f} vs {best.score:.3f}); the part is nearly symmetric and this view misses "
+                       f"the difference")
+                return _Outcome(None, replace(best, accepted=False, why=why), info)
         return _Outcome(best, closest, {**info, "hypotheses": len(hyps), "cluster_points": len(cluster)})
 
     def _rounds(
@@ -430,6 +498,61 @@ class CvfhIcpDetector(Detector):
                               "violation": round(v.violation, 4), "points_against": [ev.against_a, ev.against_b]})
         clock.lap("verify")
         return best, verified, ambiguous
+
+    def _near_twins(
+        self, best: Verdict, job: _Cluster, prep: _Prepared, clock: StageClock
+    ) -> tuple[Verdict, Verdict | None]:
+        """Try ``best`` turned by each near twin: ``(the best-scoring verified pose, a distinct rival or None)``.
+
+        A rival is a verified pose, distinct from the winner (beyond the part's
+        own symmetries), scoring within ``ambiguity_margin`` of it, that the
+        disagreement evidence (``near_fit``, ``near_off``) does not rule out.
+        """
+        s = self.settings
+        found = [best]
+        # Hull twins were judged by their own pass (found with details["ambiguous"] when the view cannot tell).
+        judged = [best.T_world_part @ H for H in prep.twins]
+        for S in prep.near:
+            T = icp_refine(job.icp_in, prep.model, best.T_world_part @ S, s.refine)
+            clock.lap("icp")
+            if not self._distinct(T, [v.T_world_part for v in found] + judged, prep.own):
+                continue  # ICP pulled it back onto a pose already tried
+            v = verify(T, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+            clock.lap("verify")
+            if v.accepted:
+                found.append(v)
+        found.sort(key=lambda v: -v.score)
+        winner = found[0]
+        for v in found[1:]:
+            if winner.score - v.score > s.ambiguity_margin or not self._distinct(
+                v.T_world_part, [winner.T_world_part], prep.own
+            ):
+                continue
+            ev = disagreement(winner.T_world_part, v.T_world_part, job.cluster, job.eye, prep.model, s.near_fit,
+                              s.near_off)
+            if ev.verdict(s.twin_min_points, s.twin_ratio) != "a":
+                return winner, v
+        return winner, None
+
+    def _apart(self, A: np.ndarray, B: np.ndarray, own: list[np.ndarray]) -> tuple[float, float]:
+        """``(mm, deg)`` between two poses, the nearest of ``B``'s symmetric equivalents."""
+        best = (math.inf, math.inf)
+        for S in own:
+            BS = B @ S
+            mm = 1000.0 * geometry.translation_distance(A, BS)
+            deg = math.degrees(geometry.rotation_distance(A, BS))
+            if mm + deg < sum(best):
+                best = (mm, deg)
+        return best
+
+    def _distinct(self, T: np.ndarray, others: list[np.ndarray], own: list[np.ndarray]) -> bool:
+        """Whether ``T`` is farther than ``distinct_mm`` or turned more than ``distinct_deg`` from every other."""
+        s = self.settings
+        for O in others:
+            mm, deg = self._apart(T, O, own)
+            if mm <= s.distinct_mm and deg <= s.distinct_deg:
+                return False
+        return True
 
     def _hypotheses(
         self, desc: CloudDescription, db: ViewDatabase, T_world_vcam: np.ndarray

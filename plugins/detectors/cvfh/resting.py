@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
+from scipy.spatial.transform import Rotation
 
 import asmteach.core  # noqa: F401  (loads libusb before open3d)
 from asmteach.core import geometry
@@ -42,7 +43,15 @@ from asmteach.plugins.detectors.cvfh.refine import ModelCloud, ray_depths
 
 import open3d as o3d  # isort: skip
 
-__all__ = ["Disagreement", "disagreement", "hull_twins", "resting_hypotheses", "stable_rests", "table_frame"]
+__all__ = [
+    "Disagreement",
+    "disagreement",
+    "hull_twins",
+    "near_twins",
+    "resting_hypotheses",
+    "stable_rests",
+    "table_frame",
+]
 
 
 def stable_rests(mesh: trimesh.Trimesh, com: np.ndarray, max_poses: int) -> np.ndarray:
@@ -74,6 +83,49 @@ def hull_twins(mesh: trimesh.Trimesh, com: np.ndarray) -> list[np.ndarray]:
         if any(np.allclose(Q[:3, :3] @ P, R, atol=1e-6) for Q in out for P in own):
             continue
         out.append(S)
+    return out
+
+
+def near_twins(
+    mesh: trimesh.Trimesh, com: np.ndarray, tol: float, step_deg: float = 15.0, samples: int = 800
+) -> list[np.ndarray]:
+    """Rotations (``(4, 4)``, part frame, about ``com``) that map the part *nearly* onto itself.
+
+    A D-peg turned about its axis, a keyed peg with its key out of sight, a
+    52 x 53 mm block turned by 90 deg: the turned part's surface stays within
+    ``tol`` (mean distance, metres) of the part's, so a view that misses the
+    small difference cannot tell the two poses apart, and verification alone
+    (measured: the wrong pose scores within 0.01 of the right one) accepts
+    either. Candidates: turns by multiples of ``step_deg`` about the three
+    principal axes and the 24 turns of the cube group in the principal frame.
+    Exact symmetries of the part (they give the same solid) are left out, as
+    are candidates that differ from a kept one by one.
+    """
+    com = np.asarray(com, float)
+    own = [S[:3, :3] for S in part_symmetries(mesh, com)]
+    F = np.array(mesh.principal_inertia_vectors, dtype=float).T  # np.array: trimesh's cache is read-only
+    if np.linalg.det(F) < 0:
+        F[:, 2] *= -1.0
+    cands = [F @ C @ F.T for C in Rotation.create_group("O").as_matrix()]
+    for k in range(3):
+        cands += [Rotation.from_rotvec(np.radians(a) * F[:, k]).as_matrix()
+                  for a in np.arange(step_deg, 360.0 - 1e-6, step_deg)]
+    pts, _ = trimesh.sample.sample_surface(mesh, samples, seed=0)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
+                        o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
+    moved = np.einsum("cij,nj->cni", np.asarray(cands), pts - com) + com
+    d = scene.compute_distance(o3d.core.Tensor(moved.reshape(-1, 3).astype(np.float32))).numpy()
+    mean = d.reshape(len(cands), -1).mean(axis=1)
+    out: list[np.ndarray] = []
+    for i in np.argsort(mean):
+        R = cands[i]
+        if mean[i] > tol:
+            break
+        same = [P for P in own] + [Q[:3, :3] @ P for Q in out for P in own]
+        if any(np.allclose(R, Q, atol=1e-6) for Q in same):
+            continue
+        out.append(geometry.from_rotation(R, com - R @ com))
     return out
 
 

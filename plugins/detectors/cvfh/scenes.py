@@ -17,7 +17,6 @@ from numpy.typing import ArrayLike
 from asmteach.core import geometry
 from asmteach.core.config import TableSettings
 from asmteach.core.models import TablePlane
-from asmteach.plugins.detectors.cvfh.detector import DEFAULT_VIEWPOINT
 from asmteach.plugins.detectors.depth_camera import DepthCamera, DepthFrame, look_at
 
 __all__ = [
@@ -30,8 +29,10 @@ __all__ = [
     "table_mesh",
 ]
 
-DEFAULT_EYE = np.array(DEFAULT_VIEWPOINT)
-"""Kinect centre (world, metres); the detectors' default viewpoint is the same point."""
+DEFAULT_EYE = np.array([-0.05, 0.0, 0.70])
+"""Where the scene renderer puts its Kinect by default (world, metres, above the table top). Only the
+renderer's default: the detectors have none, they are told the camera centre (a rendered frame carries it,
+:meth:`DepthFrame.write_ply`)."""
 
 WORK_CENTER = np.array([0.45, 0.0])
 """Centre of the work area on the table (world x, y, metres)."""

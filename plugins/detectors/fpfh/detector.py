@@ -19,7 +19,7 @@ import asmteach.core  # noqa: F401  (loads libusb before open3d)
 from asmteach.core import geometry
 from asmteach.core.interfaces import Detector, PartModel
 from asmteach.core.models import Detection, StrictModel, TablePlane, Vec3
-from asmteach.plugins.detectors.cvfh.detector import DEFAULT_VIEWPOINT, StageClock, resolve_viewpoint
+from asmteach.plugins.detectors.cvfh.detector import StageClock, resolve_viewpoint
 from asmteach.plugins.detectors.cvfh.refine import ModelCloud, RefineSettings, Verdict, icp_refine, model_cloud, verify
 from asmteach.plugins.detectors.cvfh.segment import (
     SegmentSettings,
@@ -40,9 +40,10 @@ reg = o3d.pipelines.registration
 class FpfhSettings(StrictModel):
     """Settings of the ``fpfh_ransac`` detector (metres)."""
 
-    viewpoint: Vec3 = Field(
-        default_factory=lambda: np.array(DEFAULT_VIEWPOINT),
-        description="camera centre in the world frame (orients the cluster's normals)",
+    viewpoint: Vec3 | None = Field(
+        None,
+        description="camera centre in the world frame, metres, when detect() is not given one (orients the "
+        "cluster's normals, casts the verification's rays); no default",
     )
     segment: SegmentSettings = Field(default_factory=SegmentSettings)
     refine: RefineSettings = Field(default_factory=RefineSettings)
@@ -101,7 +102,7 @@ class FpfhRansacDetector(Detector):
 
         ``viewpoint`` is the camera centre ((3,), world frame, metres) that
         orients the cluster's normals and casts the free-space check's rays;
-        ``None`` uses the ``viewpoint`` setting.
+        ``None`` uses the ``viewpoint`` setting, and :class:`UserError` without either.
         """
         eye = resolve_viewpoint(viewpoint, self.settings.viewpoint)
         prep = self._prep(part)

@@ -1,13 +1,24 @@
-"""The virtual Kinect: geometry of an ideal camera, then each term of the noise model."""
+"""The virtual Kinect: geometry of an ideal camera, each term of the noise model, and the camera centre a written
+cloud carries."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
 
 from asmteach.core import geometry
-from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings, look_at
+from asmteach.plugins.detectors.depth_camera import (
+    DepthCamera,
+    KinectSettings,
+    look_at,
+    read_viewpoint,
+    write_cloud_ply,
+)
+
+import open3d as o3d  # isort: skip
 
 
 def _plane(size: float = 4.0) -> trimesh.Trimesh:
@@ -129,3 +140,22 @@ def test_lateral_noise_blurs_edges_only() -> None:
     # Flat regions keep their depth; pixels near the box outline swap between top and floor.
     assert 50 < changed.sum() < 2000
     assert np.all(np.isclose(frame.depth[changed], 0.7, atol=1e-5) | np.isclose(frame.depth[changed], 0.8, atol=1e-5))
+
+
+def test_written_ply_carries_the_camera_centre(tmp_path: Path) -> None:
+    eye = np.array([1.05, -0.02, 0.75])
+    frame = DepthCamera(KinectSettings.ideal()).render([(_plane(), np.eye(4))], look_at(eye, [0.45, 0.0, 0.0]))
+    path = frame.write_ply(tmp_path / "scene.ply")
+    assert np.array_equal(read_viewpoint(path), eye)  # repr of the floats: exact round trip
+    # Any PLY reader gets the points (float32, world frame).
+    pts = np.asarray(o3d.io.read_point_cloud(str(path)).points)
+    assert pts.shape == frame.points_world.shape and np.allclose(pts, frame.points_world, atol=1e-6)
+    # Files that say nothing: a PLY without the comment, a PCD with PCL's default VIEWPOINT, another suffix.
+    write_cloud_ply(tmp_path / "bare.ply", pts[:10])
+    o3d.io.write_point_cloud(str(tmp_path / "bare.pcd"), o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts[:10])))
+    for name in ("bare.ply", "bare.pcd"):
+        assert read_viewpoint(tmp_path / name) is None, name
+    bad = tmp_path / "bad.ply"
+    bad.write_bytes(b"ply\nformat ascii 1.0\ncomment viewpoint 1 nan\nelement vertex 0\nend_header\n")
+    with pytest.raises(ValueError, match="finite numbers"):
+        read_viewpoint(bad)

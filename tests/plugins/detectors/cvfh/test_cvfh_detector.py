@@ -12,7 +12,7 @@ from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Placement, TablePlane
 from asmteach.core.parts import build_part, load_structure
 from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
-from asmteach.plugins.detectors.cvfh.scenes import TableScene, place_on_table, render_table_scene
+from asmteach.plugins.detectors.cvfh.scenes import DEFAULT_EYE, TableScene, place_on_table, render_table_scene
 from asmteach.plugins.detectors.cvfh.views import (
     DescriptorSettings,
     ViewSettings,
@@ -45,7 +45,8 @@ def cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def detector(cache: Path, l_block: PartModel) -> CvfhIcpDetector:
-    det = CvfhIcpDetector({"views": {"cache_dir": str(cache)}}, seed=0)
+    # The scenes are rendered from the renderer's default eye (table top at z = 0): the detector is told so.
+    det = CvfhIcpDetector({"views": {"cache_dir": str(cache)}, "viewpoint": DEFAULT_EYE.tolist()}, seed=0)
     det.prepare(l_block)
     return det
 

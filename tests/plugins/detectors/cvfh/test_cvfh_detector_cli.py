@@ -12,8 +12,8 @@ import asmteach.core  # noqa: F401  (libusb before open3d)
 from asmteach.core import geometry
 from asmteach.core.cli import main
 from asmteach.core.parts import build_part, load_structure
-from asmteach.plugins.detectors.cvfh.scenes import place_on_table, render_table_scene
-from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings
+from asmteach.plugins.detectors.cvfh.scenes import DEFAULT_EYE, place_on_table, render_table_scene
+from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings, write_cloud_ply
 
 import open3d as o3d  # isort: skip
 
@@ -22,12 +22,8 @@ STRUCTURE = REPO / "configs/parts/set1/l_corner.yaml"
 
 
 def _write_cloud(path: Path, points: np.ndarray) -> Path:
-    if len(points) == 0:  # Open3D refuses to write an empty cloud; a valid empty PLY by hand
-        header = "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\n"
-        path.write_text(header + "end_header\n")
-        return path
-    o3d.io.write_point_cloud(str(path), o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)))
-    return path
+    """A PLY of the scene renderer's camera, which carries its centre ('comment viewpoint X Y Z')."""
+    return write_cloud_ply(path, points, DEFAULT_EYE)
 
 
 @pytest.fixture(scope="module")

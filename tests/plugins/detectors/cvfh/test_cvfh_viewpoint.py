@@ -1,5 +1,6 @@
 """The ``viewpoint`` argument of ``cvfh_icp``: a camera at the robot's Kinect, the argument against the setting,
-bad viewpoints, and ``asmteach detect --viewpoint``."""
+no viewpoint at all, bad viewpoints, and where ``asmteach detect`` takes it from (``--viewpoint``, a PLY comment,
+a PCD header, else exit 2)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Placement
 from asmteach.core.parts import build_part, load_structure
 from asmteach.plugins.detectors.cvfh.commands import run_detection
-from asmteach.plugins.detectors.cvfh.detector import DEFAULT_VIEWPOINT, CvfhIcpDetector
+from asmteach.plugins.detectors.cvfh.detector import NO_VIEWPOINT, CvfhIcpDetector
 from asmteach.plugins.detectors.cvfh.scenes import TableScene, place_on_table, render_table_scene
 from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings, look_at
 from asmteach.plugins.planners.placements.corrector import StablePlacementCorrector
@@ -94,9 +95,10 @@ def test_argument_equals_setting_and_overrides_it(
     assert a.found and b.found
     assert np.allclose(a.rough, b.rough, atol=1e-6)  # the same pose (up to Open3D float rounding)
     assert np.allclose(b.details["viewpoint"], ROBOT_EYE)
-    # Without the argument the setting (the scene Kinect on the other side of the table) is used and reported.
-    c = detector.detect(scene.cloud, l_block)
-    assert np.allclose(c.details["viewpoint"], DEFAULT_VIEWPOINT)
+    # Neither the argument nor the setting: no guessed camera, one clear error naming what to give.
+    with pytest.raises(UserError, match="no camera position") as err:
+        detector.detect(scene.cloud, l_block)
+    assert str(err.value) == NO_VIEWPOINT and "--viewpoint" in NO_VIEWPOINT
 
 
 @pytest.mark.parametrize(
@@ -137,3 +139,46 @@ def test_cli_viewpoint_option(
     bad = ["detect", str(STRUCTURE), "--cloud", str(ply), "--out", str(out), "--viewpoint", "1050", "0", "750"]
     assert main(bad) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def _pcd_with_viewpoint(path: Path, points: np.ndarray, eye: np.ndarray) -> Path:
+    """An ASCII PCD (Open3D's writer) whose VIEWPOINT header holds ``eye`` (PCL: translation, then a quaternion)."""
+    o3d.io.write_point_cloud(str(path), o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)), write_ascii=True)
+    lines = path.read_text().splitlines()
+    i = next(k for k, line in enumerate(lines) if line.startswith("VIEWPOINT"))
+    assert lines[i].split()[1:] == ["0", "0", "0", "1", "0", "0", "0"]  # what every writer puts by default
+    lines[i] = "VIEWPOINT " + " ".join(map(str, eye)) + " 1 0 0 0"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_cli_viewpoint_from_the_cloud_file_else_exit_2(
+    l_block: PartModel,
+    placements: list[Placement],
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    cache: Path,
+) -> None:
+    scene = _robot_scene(l_block, placements[0].T_table_part, 1.1, (0.46, -0.03), seed=12)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(cache / "xdg"))
+    out = tmp_path / "detection.json"
+
+    def detect(cloud: Path) -> int:
+        return main(["detect", str(STRUCTURE), "--cloud", str(cloud), "--out", str(out), "--no-correct"])
+
+    # A PLY from asmteach's renderer carries the camera centre ('comment viewpoint'); a PCD its VIEWPOINT header.
+    for cloud in (scene.frame.write_ply(tmp_path / "scene.ply"),
+                  _pcd_with_viewpoint(tmp_path / "scene.pcd", scene.cloud, ROBOT_EYE)):
+        assert detect(cloud) == 0, capsys.readouterr()
+        doc = json.loads(out.read_text())
+        assert np.allclose(doc["details"]["viewpoint"], ROBOT_EYE, atol=1e-6), cloud.name
+        assert geometry.translation_distance(np.asarray(doc["rough"]["T_world_part"]), scene.T_world_part) < 0.003
+    out.unlink()
+    # A PLY that says nothing, and no --viewpoint: exit 2, one line naming what to give, no detection written.
+    bare = tmp_path / "bare.ply"
+    o3d.io.write_point_cloud(str(bare), o3d.geometry.PointCloud(o3d.utility.Vector3dVector(scene.cloud)))
+    assert detect(bare) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no camera position" in err[0] and "--viewpoint" in err[0], err
+    assert not out.exists()
