@@ -51,6 +51,12 @@ from asmteach.plugins.planners.placements.facets import convex_hull, is_closed
 __all__ = ["DropReport", "down_normal", "drop_test"]
 
 _DOWN = np.array([0.0, 0.0, -1.0])
+# Damping rates (1/s: PyBullet's multibody damping force is rate x momentum). Drops: light, so parts tumble
+# and topple as they would. _HEAVY: overdamped, so a part goes where gravity takes it without momentum
+# (a quasi-static release, what the margin d/h promises), while a balance on an edge still falls off
+# (on a metre-sized part gravity grows a tilt at about (g / h) / _HEAVY = 1 / s).
+_LIGHT_LINEAR, _LIGHT_ANGULAR = 0.04, 0.3
+_HEAVY = 10.0
 
 
 def down_normal(T_table_part: np.ndarray) -> np.ndarray:
@@ -166,7 +172,7 @@ class _World:
             pb.changeDynamics(b, -1, lateralFriction=friction, restitution=0.0, rollingFriction=rolling_friction,
                               spinningFriction=0.0, physicsClientId=c)
         pb.changeDynamics(self.body, -1, localInertiaDiagonal=np.maximum(evals, 1e-9).tolist(),
-                          linearDamping=0.04, angularDamping=0.3, physicsClientId=c)
+                          linearDamping=_LIGHT_LINEAR, angularDamping=_LIGHT_ANGULAR, physicsClientId=c)
 
     def close(self) -> None:
         pb.disconnect(self.client)
@@ -186,6 +192,9 @@ class _World:
         self._place(R @ self.E, clearance)
         stride = max(1, window // 8)
         cos_still = np.cos(np.radians(still_deg))
+        # Damped, a long part on a thin strip keeps trembling in place by about 0.1 degree per second
+        # (Bullet's contact noise); rolling or falling off an edge is much faster than this.
+        cos_damped = np.cos(np.radians(5.0 * still_deg))
 
         def run(steps: int, cos_still: float) -> bool:
             history: list[np.ndarray] = []
@@ -200,23 +209,20 @@ class _World:
             return False
 
         def rest() -> bool:
-            settled = run(max_steps, cos_still)
-            for _ in range(3):
-                if settled:
-                    break
-                # Still rolling (a cylinder on its side: neutral on a plane, and Bullet's solver keeps it
-                # going): heavy damping turns the motion into a slow descent that stops near a rest; then
-                # undamped again, so a part that stopped balanced on an edge falls off it (three rounds).
-                pb.changeDynamics(self.body, -1, linearDamping=0.9, angularDamping=0.9, physicsClientId=c)
-                run(max_steps, np.cos(np.radians(3.0 * still_deg)))
-                pb.changeDynamics(self.body, -1, linearDamping=0.04, angularDamping=0.3, physicsClientId=c)
-                settled = run(max_steps // 4, cos_still)
+            if run(max_steps, cos_still):
+                return True
+            # Still rolling (a cylinder on its side: neutral on a plane, and Bullet's solver keeps it going,
+            # or rocks it on a thin strip): heavy damping turns the motion into a slow descent to a rest. A
+            # balance on an edge still falls off (gravity beats this damping on a metre-sized part).
+            self._damp(heavy=True)
+            settled = run(2 * max_steps, cos_damped)
+            self._damp(heavy=False)
             return settled
 
         if quasi_static:
-            pb.changeDynamics(self.body, -1, linearDamping=0.9, angularDamping=0.9, physicsClientId=c)
-            run(max_steps, np.cos(np.radians(3.0 * still_deg)))
-            pb.changeDynamics(self.body, -1, linearDamping=0.04, angularDamping=0.3, physicsClientId=c)
+            self._damp(heavy=True)
+            run(2 * max_steps, cos_still)
+            self._damp(heavy=False)
         settled = rest()
         if settled:
             # A nudge of 0.3 degrees: a rest takes the part back, a balance Bullet happened to stop in
@@ -224,9 +230,17 @@ class _World:
             q = pb.getBasePositionAndOrientation(self.body, physicsClientId=c)[1]
             nudge = Rotation.from_rotvec(np.radians(0.3) * np.array([np.sqrt(0.5), np.sqrt(0.5), 0.0]))
             self._place((nudge * Rotation.from_quat(q)).as_matrix(), 1e-4 * float(np.ptp(self.local, axis=0).max()))
-            settled = rest()
+            # Let down heavily damped (undamped, a thin cylinder would start rolling again).
+            self._damp(heavy=True)
+            settled = run(max_steps, cos_damped)
+            self._damp(heavy=False)
         q = pb.getBasePositionAndOrientation(self.body, physicsClientId=c)[1]
         return Rotation.from_quat(q).as_matrix() @ self.E.T, settled
+
+    def _damp(self, *, heavy: bool) -> None:
+        """Switch between the light damping of a drop and the overdamped quasi-static one."""
+        lin, ang = (_HEAVY, _HEAVY) if heavy else (_LIGHT_LINEAR, _LIGHT_ANGULAR)
+        pb.changeDynamics(self.body, -1, linearDamping=lin, angularDamping=ang, physicsClientId=self.client)
 
     def _place(self, R_link: np.ndarray, clearance: float) -> None:
         """Put the part at rest with rotation ``R_link`` (link frame -> world), lowest point ``clearance`` m up."""

@@ -238,7 +238,9 @@ def plan_placements(
             margin=float(stab.margin[c]),
             probability=float(stab.probability[c]),
             reason=(
-                f"margin {stab.margin[c]:.3f} < {min_margin}"
+                f"rolls down the curve to the rest on facet {stab.topple_to[c]} (d/h here {stab.margin[c]:.3f})"
+                if stab.topple_to[c] != c
+                else f"margin {stab.margin[c]:.3f} < {min_margin}"
                 if not stab.stable[c]
                 else f"probability {stab.probability[c]:.3g} < {min_probability}"
             ),

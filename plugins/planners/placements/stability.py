@@ -7,28 +7,47 @@ the distance from the projection to the nearest polygon edge and ``h`` the
 height of the COM above the plane (default ``min_margin = 0.1``). Facets are
 the merged hull faces of :mod:`.facets` (angular and distance tolerances).
 
-Curved parts (rolling edges). A tessellated curve gives hull facets that are
-thin strips (a 64-gon cylinder on its side: ``d / h = tan(pi / 64) = 0.05``
-across the strip) or small patches (a duck's belly). Tipping such a part over
-a strip's long edge does not topple it: it rolls onto the next strip of the
-same curve and stays there (a cylinder: neutral) or rolls back (a belly:
-the COM rises). So an edge is a *rolling edge* when the facet across it is
-within ``roll_angle`` (default 15 degrees) of this one and either topples
-back onto this facet or holds the COM with ``d / h >= min_margin`` against
-its own steep edges (dihedral of ``roll_angle`` or more: the ones it could
-topple over; a strip next to a D-peg's flat is not such a facet, so its
-neighbours are measured against the edge onto it) with the COM no lower
-there (a neutral or uphill roll; rolling downhill leaves the rest: the
-strips of a D-peg above its lowest one); ``d`` is measured to the other
-edges only, the ones the part can topple over (the cylinder's end caps).
-A facet that holds the COM with every edge a rolling edge has nothing to
-topple over: its ``distance`` is infinite. Why 15 degrees: a regular
-``n``-gon prism has ``d / h = tan(pi / n)`` on its sides, below 0.1 exactly
-when ``n > 31``, i.e. when its dihedral angles ``2 pi / n`` are below
-11.6 degrees; from 12 sides (30 degrees) up the sides pass on ``d / h`` alone.
-A tall post standing on its end (edges of 90 degrees) is refused as before.
-PyBullet drops (:mod:`.drop_test`) settle a cylinder on a strip, a duck on
-its belly: the rests this rule reports.
+The margin as a tilt. ``d / h`` is the tangent of the smallest tilt that
+takes a resting part out of its rest: tilted about a horizontal axis, it
+comes back while the COM stays over the support, and the plane through the
+COM and an edge at distance ``d`` leans ``atan(d / h)`` from the vertical.
+The same statement holds on the sphere of down directions, where each facet
+owns the directions whose ray from the COM crosses it (the partition of the
+probability model below): a part tilted from its rest comes back as long as
+the down direction stays in the rest's *basin*, the cells of the facets that
+flow back to it. So the margin of a rest is ``tan`` of the angle from its
+normal to the basin's boundary. For a facet whose neighbours all flow
+elsewhere (any sharp-edged part) the basin is its own cell and the margin is
+exactly the authors' ``d / h``; the rule only differs on tessellated curves:
+
+* a facet that does not hold the COM topples across one edge (below); a
+  facet that holds it with ``d / h`` below the margin and has a *lower*
+  neighbour across a shallow edge (dihedral below ``roll_angle``, default
+  15 degrees) that holds too is no rest of its own: the part rolls down the
+  curve to it. (A facet that passes the authors' rule on its own is always
+  a rest, and its margin can only grow with its basin.) Following these
+  steps gives each facet its rest, and the basin of a rest is every facet
+  that ends there. A duck's belly: the hull faces around the lowest one
+  flow back to it, so it rests there with a wide basin although the lowest
+  face alone has ``d / h`` of a few hundredths; a D-peg on its round side
+  rests on its lowest strip only (the strips above it roll down to it).
+* rests joined by a shallow edge at the same COM height (within
+  ``_LEVEL_REL``) are one neutral family, one basin: a cylinder lying on its
+  side rolls from strip to strip without toppling. Every strip is reported
+  (each is a rest the part stays in), with the family's margin (tilting it
+  over an end cap: ``(L / 2) / r`` for a centred COM), although a single
+  strip of a 64-gon has ``d / h = tan(pi / 64) = 0.05`` across it.
+
+A rest whose basin is the whole sphere (nothing to topple over) has an
+infinite margin. Why 15 degrees: a regular ``n``-gon prism has
+``d / h = tan(pi / n)`` on its sides, below 0.1 exactly when ``n > 31``,
+i.e. when its dihedral angles ``2 pi / n`` are below 11.6 degrees; from 12
+sides (30 degrees) up the sides pass on ``d / h`` alone. A tall post
+standing on its end is refused as before. PyBullet drops and tilted
+releases (:mod:`.drop_test`) are the judge: released tilted by less than
+``atan(min_margin)`` a reported rest keeps the part (or lets a cylinder roll
+to a neighbouring strip), and the rests the drops find on refused facets let
+it go when tilted by more.
 
 Probability: a part dropped in a uniformly random orientation first lands on
 the facet whose solid angle (seen from the COM) contains the down direction;
@@ -36,8 +55,9 @@ if the COM projection lies outside that facet the part topples across the
 edge the projection crossed onto the neighbouring facet, and so on until a
 facet holds it (Goldberg et al., "Part pose statistics", 1999). Toppling
 lowers the COM, so the graph has no cycle. Facets where the COM is inside but
-the margin is below ``min_margin`` hold the part too (they are sinks) but are
-not reported as placements, so reported probabilities may sum to less than 1.
+the margin is below ``min_margin`` (or that roll down to another rest) hold the
+part too (they are sinks) but are not reported as placements, so reported
+probabilities may sum to less than 1.
 """
 
 from __future__ import annotations
@@ -47,7 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from asmteach.plugins.planners.placements.facets import SupportFacets, cross
+from asmteach.plugins.planners.placements.facets import SupportFacets, _components, cross
 
 # Relative COM-height tolerance of a neutral roll (a cylinder's strips are level to rounding).
 _LEVEL_REL = 1e-4
@@ -59,13 +79,14 @@ __all__ = ["DirectionStability", "FacetStability", "evaluate_direction", "facet_
 class FacetStability:
     """Per-facet stability figures (arrays of length ``C``, the facet count).
 
-    ``height``: COM height above the support plane (m); ``distance``: signed distance
-    (m) from the projected COM to the nearest edge line the part can topple over
-    (rolling edges left out: see the module docstring), positive inside, ``inf``
-    when every edge is a rolling edge; ``margin``: ``distance / height``;
-    ``stable``: ``margin >= min_margin``; ``rolls``: the facet has rolling edges;
+    ``height``: COM height above the support plane (m); ``margin``: of a rest, ``tan`` of the
+    smallest tilt out of its basin (module docstring; ``inf`` when nothing to topple over), else
+    the plain ``d / h``; ``distance``: ``margin * height`` (m) where the COM projection is inside,
+    else the signed distance (negative) to the nearest edge line; ``stable``: a rest (holds and
+    rolls to no lower neighbour) with ``margin >= min_margin``; ``rolls``: a rest whose basin has
+    other facets (a curve);
     ``holds``: the COM projection is inside (a sink of the toppling graph);
-    ``topple_to``: facet reached by toppling (itself for sinks);
+    ``topple_to``: the rest the part ends on from this facet, toppling and rolling down (itself for rests);
     ``solid_angle``: steradians seen from the COM; ``probability``: of ending on each facet.
     """
 
@@ -149,34 +170,69 @@ def facet_stability(
     falls = ~holds & (best_edge >= 0)
     topple[falls] = facets.edge_neighbor[best_edge[falls]]
 
-    # Follow the toppling chains to their sinks by pointer jumping.
-    final = topple.copy()
-    for _ in range(int(np.ceil(np.log2(max(n_c, 2)))) + 2):
-        final = final[final]
-    stuck = final[final] != final  # numerical ties that form a cycle: stop where they are
-    final[stuck] = np.flatnonzero(stuck)
-
-    # Rolling edges of holding facets: onto a facet within roll_angle that topples back, or that holds
-    # and passes the rule against its own steep edges (the ones it could topple over).
+    # Basins (module docstring). A facet that holds rolls on to its lowest shallow neighbour that holds
+    # when that is lower (by more than _LEVEL_REL); one that does not hold topples across one edge.
     own, nb = facets.edge_cluster, facets.edge_neighbor
     shallow = np.einsum("ij,ij->i", facets.normals[own], facets.normals[nb]) > np.cos(roll_angle)
     safe_h = np.maximum(height, 1e-12)
-    steep_d = np.full(n_c, np.inf)
-    np.minimum.at(steep_d, own[~shallow], s[~shallow])
-    firm = holds & (steep_d / safe_h >= min_margin)
-    # Rolling onto a firm facet must not lower the COM (a neutral or uphill roll): on a D-peg lying on its
-    # round side the strips above the lowest one roll down toward it, so they are not rests of their own.
-    level = height[nb] >= height[own] * (1.0 - _LEVEL_REL)
-    rolling = holds[own] & shallow & ((final[nb] == own) | (firm[nb] & level))
-    distance = np.where(holds, np.inf, distance)
-    np.minimum.at(distance, own[~rolling & holds[own]], s[~rolling & holds[own]])
-    rolls = np.bincount(own[rolling], minlength=n_c) > 0
-    margin = distance / safe_h
-    stable = margin >= min_margin
+    # Only a facet that fails the rule on its own rolls on: with d / h >= min_margin it is a rest whatever
+    # its neighbours, as the authors' rule says.
+    weak = holds & (distance / safe_h < min_margin)
+    lower = shallow & weak[own] & holds[nb] & (height[nb] < height[own] * (1.0 - _LEVEL_REL))
+    step = topple.copy()
+    if lower.any():
+        e = _first_per_group(own[lower], height[nb[lower]], n_c)
+        has = e >= 0
+        step[has] = nb[lower][e[has]]
+    root = step.copy()  # follow the chains to their ends by pointer jumping
+    for _ in range(int(np.ceil(np.log2(max(n_c, 2)))) + 2):
+        root = root[root]
+    loop = root[root] != root  # numerical ties that form a cycle: stop where they are
+    root[loop] = np.flatnonzero(loop)
+    rest = holds & (root == np.arange(n_c))
+    # Rests joined by a shallow edge at the same COM height are one neutral family (a cylinder's strips).
+    level = shallow & rest[own] & rest[nb] & (np.abs(height[nb] - height[own]) <= _LEVEL_REL * height[own])
+    _, family_of = _components(n_c, own[level], nb[level])
+    basin = family_of[root]
+    # Margin of a rest: tan of the smallest tilt that takes the part out of its basin, i.e. the angle from
+    # its normal to the basin's boundary on the sphere of down directions: the planes through the COM and
+    # the hull edges between the basin and the rest (Goldberg's partition). A single facet's basin gives
+    # d / h exactly (the plane through the COM and an edge at distance d leans atan(d / h)).
+    edge_out = basin[own] != basin[nb]
+    pa = v[facets.edges[edge_out, 0]] - com
+    pb_ = v[facets.edges[edge_out, 1]] - com
+    pa /= np.linalg.norm(pa, axis=1, keepdims=True)
+    pb_ /= np.linalg.norm(pb_, axis=1, keepdims=True)
+    m = cross(pa, pb_)
+    m /= np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-300)
+    out_basin = basin[own[edge_out]]
+    angle = np.full(n_c, np.inf)
+    for f in np.flatnonzero(rest):
+        sel = out_basin == basin[f]
+        if not sel.any():
+            continue  # the whole sphere flows here: nothing to topple over
+        n = facets.normals[f]
+        nm = m[sel] @ n
+        q = n - nm[:, None] * m[sel]  # n projected on each plane
+        inside = (np.einsum("ij,ij->i", cross(pa[sel], q), m[sel]) >= 0.0) & (
+            np.einsum("ij,ij->i", cross(q, pb_[sel]), m[sel]) >= 0.0
+        )
+        to_arc = np.where(
+            inside,
+            np.arcsin(np.clip(np.abs(nm), 0.0, 1.0)),
+            np.arccos(np.clip(np.minimum(np.maximum(pa[sel] @ n, pb_[sel] @ n), 1.0), -1.0, 1.0)),
+        )
+        angle[f] = float(to_arc.min())
+    # Facets that hold but are no rest of their own (they roll down to one) keep their plain d / h.
+    margin = np.where(rest, np.tan(np.minimum(angle, np.pi / 2 - 1e-12)), distance / safe_h)
+    margin = np.where(rest & ~np.isfinite(angle), np.inf, margin)
+    distance = np.where(holds, margin * safe_h, distance)
+    rolls = rest & (np.bincount(basin, minlength=n_c)[basin] > 1)
+    stable = rest & (margin >= min_margin)
 
     solid_f = _solid_angles(facets.vertices[facets.faces], com)
     solid = np.bincount(facets.face_cluster, weights=solid_f, minlength=n_c)
-    prob = np.bincount(final, weights=solid, minlength=n_c) / max(solid.sum(), 1e-300)
+    prob = np.bincount(root, weights=solid, minlength=n_c) / max(solid.sum(), 1e-300)
     return FacetStability(
         height=height,
         distance=distance,
@@ -184,7 +240,7 @@ def facet_stability(
         stable=stable,
         rolls=rolls,
         holds=holds,
-        topple_to=final,
+        topple_to=root,
         solid_angle=solid,
         probability=prob,
     )

@@ -47,9 +47,16 @@ def test_millimetre_mesh_is_detected(tmp_path: Path, capsys: pytest.CaptureFixtu
 
 
 def test_flat_mesh_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    mesh = tmp_path / "sheet.stl"
-    trimesh.Trimesh([[0, 0, 0], [0.1, 0, 0], [0.1, 0.1, 0], [0, 0.1, 0]], [[0, 1, 2], [0, 2, 3]]).export(mesh)
-    assert main(["placements", str(mesh), "--out", str(tmp_path / "p.json")]) == 2
+    # A two-triangle sheet is refused by the mesh loader (not a solid), a closed box of no thickness by
+    # the planner (flat); both exit 2 with the cause, no traceback.
+    sheet = tmp_path / "sheet.stl"
+    trimesh.Trimesh([[0, 0, 0], [0.1, 0, 0], [0.1, 0.1, 0], [0, 0.1, 0]], [[0, 1, 2], [0, 2, 3]]).export(sheet)
+    assert main(["placements", str(sheet), "--out", str(tmp_path / "p.json")]) == 2
+    err = capsys.readouterr().err
+    assert "not a solid" in err and "Traceback" not in err
+    flat = tmp_path / "flat.stl"
+    trimesh.creation.box(extents=(0.1, 0.1, 1e-9)).export(flat)
+    assert main(["placements", str(flat), "--out", str(tmp_path / "p.json")]) == 2
     err = capsys.readouterr().err
     assert "flat or degenerate" in err and "Traceback" not in err
 
@@ -61,13 +68,14 @@ def test_com_outside_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     assert "outside" in capsys.readouterr().err
 
 
-def test_open_mesh_warns_and_uses_hull(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+def test_open_mesh_warns_and_is_repaired(tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
     box = trimesh.creation.box(extents=(0.07, 0.05, 0.03))
     mesh = tmp_path / "open.stl"
     trimesh.Trimesh(box.vertices, box.faces[:-2]).export(mesh)
     out = tmp_path / "p.json"
     assert main(["placements", str(mesh), "--out", str(out), "--no-sheet"]) == 0
-    assert any("not watertight" in r.getMessage() for r in caplog.records)
+    # The loader fills the missing side (core.mesh_repair) and says so.
+    assert any("filled 1 hole" in r.getMessage() for r in caplog.records)
     assert len(json.loads(out.read_text())["placements"]) == 6
 
 

@@ -9,6 +9,7 @@ import trimesh
 from asmteach.plugins.planners.placements.drop_test import down_normal, drop_test
 from asmteach.plugins.planners.placements.facets import MERGE_DIST_REL, convex_hull, support_facets
 from asmteach.plugins.planners.placements.planner import PlacementResult, plan_placements
+from asmteach.plugins.planners.placements.stability import evaluate_direction
 
 
 def _normals(res: PlacementResult) -> np.ndarray:
@@ -108,3 +109,22 @@ def test_drop_test_finds_a_missing_placement_and_a_spurious_one() -> None:
     assert any(m == -1 and n @ hidden > 0.99 for n, m in zip(rep.rests, rep.rest_match, strict=True))
     assert rep.missed >= 1
     assert rep.stays[:3].all() and not rep.stays[3] and rep.spurious == 1
+
+
+def test_every_facet_passing_the_rule_is_reported_and_only_curved_rests_below_it() -> None:
+    # The rule against a brute force over hull face planes (independent contact test), on random
+    # polytopes and on a part whose faces are uneven by half the merge tolerance.
+    rng = np.random.default_rng(5)
+    meshes = [trimesh.convex.convex_hull(rng.normal(size=(30, 3)) * [0.04, 0.02, 0.01]) for _ in range(6)]
+    meshes.append(_rough(trimesh.creation.box(extents=(0.12, 0.03, 0.02)), 0.01, 0.5 * MERGE_DIST_REL * 0.12, 6))
+    for mesh in meshes:
+        res = plan_placements(mesh)
+        hv, com = res.convex.vertices, res.center_of_mass
+        tol = 1.01 * MERGE_DIST_REL * float(np.ptp(hv, axis=0).max())
+        ours = _normals(res)
+        for n in res.convex.normals:
+            if evaluate_direction(hv, com, n, tol=tol).margin >= 0.1 + 1e-6:
+                assert np.max(ours @ n) > np.cos(np.radians(1.0)), "a facet with d/h >= 0.1 is missing"
+        for c, n in zip(res.facet_of_placement, ours, strict=True):
+            plain = evaluate_direction(hv, com, n, tol=max(tol, 1.01 * float(res.facets.depth[c]))).margin
+            assert plain >= 0.1 - 1e-6 or res.stability.rolls[c], f"d/h {plain:.3f} reported off a curve"
