@@ -327,6 +327,9 @@ class ArmRobot(Robot):
                 mesh = trimesh.creation.box(extents=2.0 * g.half)
             elif g.kind == "cylinder":
                 mesh = trimesh.creation.cylinder(radius=g.half[0], height=2.0 * g.half[2], sections=24)
+            elif g.kind == "mesh" and g.mesh is not None:  # a vendor's link mesh is in its geometry frame
+                meshes.append((g.mesh, static[g.joint] @ g.placement))
+                continue
             else:
                 continue
             meshes.append((mesh, static[g.joint] @ g.placement @ g.obb))

@@ -49,6 +49,7 @@ class _Geom:
     fcl_obj: object = None
     tags: set[str] = field(default_factory=set)
     kind: str = "box"  # box, cylinder, sphere or mesh
+    mesh: trimesh.Trimesh | None = None  # the mesh of a mesh geometry, in its geometry frame
 
     @property
     def radius(self) -> float:
@@ -68,7 +69,7 @@ def _bvh(mesh: trimesh.Trimesh) -> fcl.BVHModel:
 def _mesh_geom(name: str, link: str, joint: int, placement: np.ndarray, mesh: trimesh.Trimesh) -> _Geom:
     obb = mesh.bounding_box_oriented
     return _Geom(name, link, joint, placement, np.asarray(obb.primitive.transform, dtype=float),
-                 0.5 * np.asarray(obb.primitive.extents, dtype=float), False, _bvh(mesh), kind="mesh")
+                 0.5 * np.asarray(obb.primitive.extents, dtype=float), False, _bvh(mesh), kind="mesh", mesh=mesh)
 
 
 def _box_geom(name: str, link: str, joint: int, placement: np.ndarray, size: np.ndarray) -> _Geom:

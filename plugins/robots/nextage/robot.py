@@ -8,6 +8,13 @@ the WAIST (the robot's root: x forward, y left, z up) sits
 is 0.97 m above it), a little below the fingertips at the upstream init pose.
 Give ``base_pose`` to place the WAIST anywhere else.
 
+Model: by default our own primitive-shape URDF (``nextage.urdf``, boxes and
+cylinders, fast exact collision checks). ``urdf:`` gives the vendor's
+``NextageOpen.urdf`` instead (``package://`` meshes resolved from
+``package_paths``), with our gripper on its wrist flanges
+(:mod:`asmteach.plugins.robots.nextage.vendor`): same joint and link names,
+the vendor's meshes for planning (python-fcl) and simulation (PyBullet).
+
 Arms ``"left"`` and ``"right"``: ``LARM_JOINT0..5`` / ``RARM_JOINT0..5``,
 with ``use_chest: true`` preceded by ``CHEST_JOINT0`` (7 DOF; moving the
 chest moves both arms). The TCP is ``*ARM_TCP_Link`` of the two-finger
@@ -19,17 +26,20 @@ behind the workspace as the camera sees it; the upstream init pose
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Literal
 
 import numpy as np
 from pydantic import Field
 
 from asmteach.core import geometry
+from asmteach.core.errors import UserError
 from asmteach.core.models import Mat4
 from asmteach.plugins.robots.nextage.arm_robot import ArmRobot, ArmRobotSettings, ArmSpec
 from asmteach.plugins.robots.nextage.build_urdf import GRIPPER, URDF_PATH
 from asmteach.plugins.robots.nextage.hand import nextage_hand
 from asmteach.plugins.robots.nextage.sim import GripperJoints
+from asmteach.plugins.robots.nextage.vendor import vendor_urdf
 
 __all__ = ["INIT_POSE", "READY_POSE", "SRDF_DISABLED", "NextagePyBullet"]
 
@@ -76,6 +86,12 @@ class NextageSettings(ArmRobotSettings):
     home_pose: Literal["ready", "init"] = Field(
         "ready", description="home: hands 0.15 m above the table (ready) or the upstream init pose"
     )
+    urdf: str | None = Field(
+        None, description="the vendor's NextageOpen.urdf (nextage_description) instead of our primitive model; "
+        "relative paths from the working directory; our gripper goes on its wrist flanges")
+    package_paths: list[str] = Field(
+        default_factory=list, description="folders holding ROS packages (package.xml) for package:// mesh URIs "
+        "of `urdf`; the URDF's own folder and its parents are always searched")
 
 
 class NextagePyBullet(ArmRobot):
@@ -103,4 +119,11 @@ class NextagePyBullet(ArmRobot):
                                     f"{pre}_TCP_Link", [f"{pre}_FINGER0_Link", f"{pre}_FINGER1_Link"])
             arms[arm] = ArmSpec(joints, f"{pre}_TCP_Link", home, gripper,
                                 [f"{pre}_GRIPPER_Link", f"{pre}_FINGER0_Link", f"{pre}_FINGER1_Link"])
-        self._setup(URDF_PATH, T, arms, nextage_hand(st.grip_force), SRDF_DISABLED)
+        if st.urdf is None:
+            urdf = URDF_PATH
+        else:
+            if not Path(st.urdf).expanduser().is_file():
+                raise UserError(f"robot.settings.urdf: {st.urdf} does not exist (relative paths are from the working "
+                                f"directory {Path.cwd()})")
+            urdf = vendor_urdf(st.urdf, st.package_paths)
+        self._setup(urdf, T, arms, nextage_hand(st.grip_force), SRDF_DISABLED)

@@ -1,28 +1,16 @@
-"""Fixtures of the ArUco tests: the real photos of ``<repo>/../shared/data`` (read in place, never copied)."""
+"""Fixtures of the ArUco tests. The ``real_data`` fixture and its skip/fail rule moved to ``tests/conftest.py``
+(shared with the robot tests); ``require_real_data`` is re-exported here for the test that loads this file by path."""
 
 from __future__ import annotations
 
-import os
+import importlib.util
 from pathlib import Path
 
-import pytest
+_ROOT_CONFTEST = Path(__file__).resolve().parents[3] / "conftest.py"
+_spec = importlib.util.spec_from_file_location("tests_root_conftest", _ROOT_CONFTEST)
+assert _spec is not None and _spec.loader is not None
+_root = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_root)
 
-# tests/plugins/detectors/aruco/conftest.py -> parents[4] is the repository root; the data sit beside it.
-REAL_DATA = Path(__file__).resolve().parents[4] / ".." / "shared" / "data"
-
-
-def require_real_data(folder: Path) -> Path:
-    """``folder`` resolved if it holds ``real/``; otherwise skip the test, or fail it when ``CI`` is set
-    (CI clones ``shared/`` beside the repository: a missing folder there is a broken setup, not a reason)."""
-    if not (folder / "real").is_dir():
-        reason = f"real sensor data not found at {folder.resolve()} (clone shared/ beside the repository)"
-        if os.environ.get("CI"):
-            pytest.fail(reason + "; CI must provide it")
-        pytest.skip(reason)
-    return folder.resolve()
-
-
-@pytest.fixture(scope="session")
-def real_data() -> Path:
-    """The shared real-data folder (see :func:`require_real_data` for the skip/fail rule)."""
-    return require_real_data(REAL_DATA)
+REAL_DATA = _root.REAL_DATA
+require_real_data = _root.require_real_data
