@@ -41,7 +41,6 @@ a wrong pose is never reported as found.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field, replace
 
@@ -258,8 +257,9 @@ class CvfhIcpDetector(Detector):
         diameter = float(np.linalg.norm(np.ptp(np.asarray(part.mesh.vertices), axis=0)))
         com = np.asarray(part.center_of_mass, float)
         rests = stable_rests(part.mesh, com, s.resting_poses) if s.resting_poses else np.zeros((0, 4, 4))
-        twins = hull_twins(part.mesh, com)
-        near = near_twins(part.mesh, com, s.near_twin_tol) if s.near_twin_tol > 0 else []
+        own = part_symmetries(part.mesh, com)
+        twins = hull_twins(part.mesh, com, own)
+        near = near_twins(part.mesh, com, s.near_twin_tol, own=own) if s.near_twin_tol > 0 else []
         if s.nudge_deg > 0:
             # Small turns about the principal axes: a pose ICP left a few degrees off (a smooth free-form part)
             # is pulled to the right one, or shows the view does not pin it down.
@@ -268,7 +268,6 @@ class CvfhIcpDetector(Detector):
                 for a in (-s.nudge_deg, s.nudge_deg):
                     R = geometry.from_rotvec(np.radians(a) * axis / np.linalg.norm(axis))[:3, :3]
                     near.append(geometry.from_rotation(R, com - R @ com))
-        own = part_symmetries(part.mesh, com)
         prep = _Prepared(model, db, diameter, built, 1000.0 * (time.perf_counter() - t0), rests, twins, near, own)
         self._prepared[key] = prep
         return prep
@@ -535,15 +534,13 @@ class CvfhIcpDetector(Detector):
         return winner, None
 
     def _apart(self, A: np.ndarray, B: np.ndarray, own: list[np.ndarray]) -> tuple[float, float]:
-        """``(mm, deg)`` between two poses, the nearest of ``B``'s symmetric equivalents."""
-        best = (math.inf, math.inf)
-        for S in own:
-            BS = B @ S
-            mm = 1000.0 * geometry.translation_distance(A, BS)
-            deg = math.degrees(geometry.rotation_distance(A, BS))
-            if mm + deg < sum(best):
-                best = (mm, deg)
-        return best
+        """``(mm, deg)`` between two poses, the nearest of ``B``'s symmetric equivalents ``B @ S``."""
+        BS = np.einsum("ij,sjk->sik", B, np.asarray(own).reshape(-1, 4, 4))
+        mm = 1000.0 * np.linalg.norm(BS[:, :3, 3] - A[:3, 3], axis=1)
+        cos = (np.einsum("ij,sij->s", A[:3, :3], BS[:, :3, :3]) - 1.0) / 2.0
+        deg = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+        i = int(np.argmin(mm + deg))
+        return float(mm[i]), float(deg[i])
 
     def _distinct(self, T: np.ndarray, others: list[np.ndarray], own: list[np.ndarray]) -> bool:
         """Whether ``T`` is farther than ``distinct_mm`` or turned more than ``distinct_deg`` from every other."""

@@ -66,14 +66,15 @@ def stable_rests(mesh: trimesh.Trimesh, com: np.ndarray, max_poses: int) -> np.n
     return np.asarray(out).reshape(-1, 4, 4)
 
 
-def hull_twins(mesh: trimesh.Trimesh, com: np.ndarray) -> list[np.ndarray]:
+def hull_twins(mesh: trimesh.Trimesh, com: np.ndarray, own: list[np.ndarray] | None = None) -> list[np.ndarray]:
     """Rotations (``(4, 4)``, part frame) mapping the convex hull onto itself but not the part.
 
     One per class: two twins that differ by a symmetry of the part itself give
-    the same pose and only the first is kept.
+    the same pose and only the first is kept. ``own``: the part's symmetries
+    when already known (:func:`part_symmetries`; a soccer ball's take 40 s).
     """
     hull = mesh.convex_hull
-    own = [S[:3, :3] for S in part_symmetries(mesh, np.asarray(com, float))]
+    own = [S[:3, :3] for S in (part_symmetries(mesh, np.asarray(com, float)) if own is None else own)]
     out: list[np.ndarray] = []
     for S in part_symmetries(hull, np.asarray(hull.center_mass, float)):
         R = S[:3, :3]
@@ -87,7 +88,12 @@ def hull_twins(mesh: trimesh.Trimesh, com: np.ndarray) -> list[np.ndarray]:
 
 
 def near_twins(
-    mesh: trimesh.Trimesh, com: np.ndarray, tol: float, step_deg: float = 15.0, samples: int = 800
+    mesh: trimesh.Trimesh,
+    com: np.ndarray,
+    tol: float,
+    step_deg: float = 15.0,
+    samples: int = 800,
+    own: list[np.ndarray] | None = None,
 ) -> list[np.ndarray]:
     """Rotations (``(4, 4)``, part frame, about ``com``) that map the part *nearly* onto itself.
 
@@ -99,10 +105,11 @@ def near_twins(
     either. Candidates: turns by multiples of ``step_deg`` about the three
     principal axes and the 24 turns of the cube group in the principal frame.
     Exact symmetries of the part (they give the same solid) are left out, as
-    are candidates that differ from a kept one by one.
+    are candidates that differ from a kept one by one (``own``: the part's
+    symmetries when already known).
     """
     com = np.asarray(com, float)
-    own = [S[:3, :3] for S in part_symmetries(mesh, com)]
+    own = [S[:3, :3] for S in (part_symmetries(mesh, com) if own is None else own)]
     F = np.array(mesh.principal_inertia_vectors, dtype=float).T  # np.array: trimesh's cache is read-only
     if np.linalg.det(F) < 0:
         F[:, 2] *= -1.0
@@ -118,14 +125,16 @@ def near_twins(
     d = scene.compute_distance(o3d.core.Tensor(moved.reshape(-1, 3).astype(np.float32))).numpy()
     mean = d.reshape(len(cands), -1).mean(axis=1)
     out: list[np.ndarray] = []
+    own_arr = np.asarray(own).reshape(-1, 3, 3)
+    same = own_arr  # rotations giving a pose already covered: the part's symmetries, then kept twins times them
     for i in np.argsort(mean):
         R = cands[i]
         if mean[i] > tol:
             break
-        same = [P for P in own] + [Q[:3, :3] @ P for Q in out for P in own]
-        if any(np.allclose(R, Q, atol=1e-6) for Q in same):
+        if np.any(np.abs(same - R).max(axis=(1, 2)) < 1e-6):
             continue
         out.append(geometry.from_rotation(R, com - R @ com))
+        same = np.concatenate([same, R @ own_arr])
     return out
 
 
