@@ -2,8 +2,9 @@
 
 Pipeline (paper, section "Noise correction using geometric constraints"):
 convex hull -> support facets (hull faces merged within an angular and a
-distance tolerance, :mod:`.facets`) -> stability test with a margin, rolling
-edges of curved sides left out (:mod:`.stability`) -> one
+distance tolerance, :mod:`.facets`) -> stability test with a margin (the
+authors' ``d / h``, read as the tilt a rest withstands, so that on a
+tessellated curve it counts the facets that roll back: :mod:`.stability`) -> one
 :class:`~asmteach.core.models.Placement` per stable facet, with its rotation
 (facet on the table, canonical yaw), support polygon, landing probability and
 rotational symmetry about the table normal. A merged facet is flat within the
@@ -11,8 +12,8 @@ tolerances, so the part rests on the plane of its mean normal. The rule is
 checked against PyBullet drops by :mod:`.drop_test` (and over the part corpus
 by ``benchmarks/placements_drop.py``).
 
-A facet with nothing to topple over (every edge a rolling edge: a sphere, a
-belly with no edge in reach) is reported with margin :data:`NO_TOPPLE_MARGIN`.
+A rest with nothing to topple over (its basin is the whole sphere of down
+directions) is reported with margin :data:`NO_TOPPLE_MARGIN`.
 
 Frames: ``T_table_part`` maps part-frame points (metres) into the table frame
 (z up, table surface z = 0). Canonical yaw: the rotation has fixed-axis yaw 0
@@ -61,7 +62,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 _CACHE_SIZE = 64
-# Reported margin of a facet with nothing to topple over (every edge a rolling edge: see stability).
+# Reported margin of a rest with nothing to topple over (its basin is every down direction: see stability).
 NO_TOPPLE_MARGIN = 100.0
 _cache: OrderedDict[tuple[Any, ...], PlacementResult] = OrderedDict()
 _warned: set[str] = set()
@@ -166,8 +167,8 @@ def plan_placements(
     angle_tol_deg : faces whose normals differ by less are one support facet.
     merge_dist_rel : faces whose vertices lie within this fraction of the part's largest extent of an
         adjacent face's plane are one support facet (see :mod:`.facets`).
-    roll_angle_deg : largest dihedral angle of a rolling edge, degrees (see :mod:`.stability`); 0 turns
-        rolling rests off.
+    roll_angle_deg : largest dihedral angle, degrees, across which a weak facet rolls down a curve or
+        level rests form one neutral family (see :mod:`.stability`); 0 turns curved rests off.
     min_probability : placements less likely than this are dropped (0 keeps every stable one).
     symmetry : find each placement's rotational symmetry about the table normal.
     name : how messages refer to the part.

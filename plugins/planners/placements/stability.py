@@ -133,7 +133,8 @@ def facet_stability(
 ) -> FacetStability:
     """Stability and landing probability of every facet for a COM (part frame, metres).
 
-    ``roll_angle`` (radians): largest dihedral of a rolling edge; 0 measures ``d`` to every edge.
+    ``roll_angle`` (radians): largest dihedral across which a weak facet rolls down a curve or level
+    rests join one neutral family; 0 gives every facet its own basin (the plain ``d / h``).
     """
     com = np.asarray(com, dtype=float)
     n_c = facets.count

@@ -56,7 +56,7 @@ def test_merge_tolerance_is_distance_then_angle() -> None:
 def test_rolling_rests_of_a_cylinder_and_the_tall_post_still_refused() -> None:
     lying = plan_placements(trimesh.creation.cylinder(radius=0.01, height=0.1, sections=64))
     side = [i for i, p in enumerate(lying.placements) if abs(down_normal(p.T_table_part)[2]) < 1e-6]
-    assert len(side) == 64  # every strip: d/h = 0.049 across it, but its long edges are rolling edges
+    assert len(side) == 64  # every strip: d/h = 0.049 across it, but the strips are one neutral family
     assert all(lying.stability.rolls[lying.facet_of_placement[i]] for i in side)
     # Measured to the end caps instead: d/h = 0.05 / 0.01 (COM height 0.01 * cos(pi / 64)).
     assert lying.placements[side[0]].margin == pytest.approx(0.05 / (0.01 * np.cos(np.pi / 64)), rel=1e-6)
@@ -77,7 +77,7 @@ def test_planner_agrees_with_the_drop_test(shape: str) -> None:
     elif shape == "thin_plate":
         mesh = trimesh.creation.box(extents=(0.08, 0.06, 0.003))
     elif shape == "tube":
-        mesh = trimesh.creation.annulus(r_min=0.008, r_max=0.012, height=0.08, sections=48)
+        mesh = trimesh.creation.annulus(r_min=0.008, r_max=0.012, height=0.08, sections=36)
     elif shape == "prism_with_hole":
         hole = trimesh.creation.cylinder(radius=0.008, height=0.05, sections=32)
         mesh = trimesh.creation.box(extents=(0.05, 0.04, 0.02)).difference(hole, engine="manifold")
@@ -94,7 +94,7 @@ def test_planner_agrees_with_the_drop_test(shape: str) -> None:
     assert rep.spurious == 0, f"{shape}: placements that toppled {np.flatnonzero(~rep.stays & ~rep.rolled)}"
     assert rep.matched == rep.found
     if shape == "tube":
-        assert len(res.placements) == 50  # 48 strips on its side, 2 ends
+        assert len(res.placements) == 38  # 36 strips on its side (d/h = tan 5 deg = 0.087 across one), 2 ends
     if shape == "free_form":
         assert np.any(np.abs(_normals(res)[:, 2]) > 0.95)  # resting on its flattest side
 
@@ -128,3 +128,19 @@ def test_every_facet_passing_the_rule_is_reported_and_only_curved_rests_below_it
         for c, n in zip(res.facet_of_placement, ours, strict=True):
             plain = evaluate_direction(hv, com, n, tol=max(tol, 1.01 * float(res.facets.depth[c]))).margin
             assert plain >= 0.1 - 1e-6 or res.stability.rolls[c], f"d/h {plain:.3f} reported off a curve"
+
+
+def test_d_peg_rests_on_its_lowest_strip_only() -> None:
+    # A round peg with a flat: its COM moves away from the flat, so on its round side it rolls down to
+    # the strips opposite the flat (two, tied at the bottom); the strips above them are sinks of the
+    # 64-gon with d/h of a few hundredths that a tilt of 6.9 degrees knocks the part out of.
+    cut = trimesh.creation.box(extents=(0.01, 0.03, 0.07))
+    cut.apply_translation([0.012, 0.0, 0.0])
+    peg = trimesh.creation.cylinder(radius=0.01, height=0.06, sections=64).difference(cut, engine="manifold")
+    res, rep = _judge(peg, drops=12)
+    side = _normals(res)[np.abs(_normals(res)[:, 2]) < 1e-6]
+    assert len(side) == 3  # the two lowest strips and the flat
+    assert np.sum(side[:, 0] < -0.99) == 2 and np.sum(side[:, 0] > 0.99) == 1
+    assert all("rolls down" in r.reason for r in res.rejected)
+    assert rep.missed == 0 and rep.spurious == 0
+    assert rep.below_margin_fragile == rep.below_margin
