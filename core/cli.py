@@ -123,9 +123,11 @@ def build_parser(pm=None) -> argparse.ArgumentParser:
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key (dotted path)")
     p.set_defaults(func=_cmd_run, plugin_manager=pm)
 
+    from asmteach.core.check_part import add_check_part_command
     from asmteach.core.sweep import add_sweep_command
 
     add_sweep_command(sub)
+    add_check_part_command(sub, pm)
 
     if pm is not None:
         pm.hook.asmteach_add_commands(subparsers=sub)

@@ -53,6 +53,28 @@ class Specs:
         """A run's report is final; reporters may write extra files and return their paths."""
 
     @hookspec
+    def asmteach_check_part(self, part: Any, out_dir: Path | None) -> list[tuple[str, str, str]]:
+        """What this plugin's stage will do with ``part`` (a :class:`~asmteach.core.interfaces.PartModel`).
+
+        :param out_dir: folder for pictures, or ``None`` for none.
+        :return: rows ``(stage, level, text)``, ``level`` one of ``"ok"``, ``"warn"``, ``"fail"``;
+            the text says what a user can do about it (``asmteach check-part``).
+        """
+
+    @hookspec(firstresult=True)
+    def asmteach_measure_part(self, part: Any, stage: str, seed: int, workdir: Path,
+                              options: dict[str, Any]) -> dict[str, Any] | None:
+        """Measure ``stage`` on ``part`` for the ``part_corpus`` experiment; ``None`` when not this plugin's stage.
+
+        :param stage: ``"placements"``, ``"grasps"`` or ``"detection"``.
+        :param seed: the trial's seed (scenes, drops, samples).
+        :param workdir: the trial's folder for artefacts.
+        :param options: ``{"scenes": n}`` and the like, from the experiment's params.
+        :return: flat JSON-able metrics; the keys each stage must give are read by
+            :func:`asmteach.core.corpus_sweep.passed`.
+        """
+
+    @hookspec
     def asmteach_add_commands(self, subparsers: argparse._SubParsersAction) -> None:
         """Add CLI sub-commands; set ``func=callable(args) -> int`` as the parser default."""
 

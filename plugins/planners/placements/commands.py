@@ -80,3 +80,25 @@ def asmteach_add_commands(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--angle-tol-deg", type=float, default=1.0, help="coplanar-face tolerance, degrees")
     p.add_argument("--no-sheet", action="store_true", help="skip the contact-sheet PNG")
     p.set_defaults(func=_cmd_placements)
+
+
+@hookimpl
+def asmteach_check_part(part: PartModel, out_dir: Path | None) -> list[tuple[str, str, str]]:
+    """Stable placements of ``part`` for ``asmteach check-part``, with a contact sheet in ``out_dir``."""
+    result = placement_result(part)
+    n = len(result.placements)
+    if n == 0:
+        return [("placements", "fail", "no facet of the convex hull holds the centre of mass with d/h >= 0.1: "
+                                       "the part cannot rest on the table (check center_of_mass)")]
+    margins = ", ".join(f"{p.margin:.2f}" for p in result.placements)
+    text = f"{n} stable placements (d/h {margins})"
+    if out_dir is not None:
+        sheet = render_contact_sheet(part.mesh, result.placements, part.center_of_mass,
+                                     Path(out_dir) / f"{part.name}_placements.png",
+                                     title=f"{part.name}: stable placements")
+        text += f"; picture {sheet}"
+    rows = [("placements", "ok", text)]
+    if n == 1:
+        rows.append(("placements", "warn", "only one stable placement: the regrasp graph has no intermediate "
+                                           "rest to turn the part over"))
+    return rows
