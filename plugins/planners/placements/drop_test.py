@@ -70,10 +70,11 @@ class DropReport:
 
     ``placement_normals``: down direction of each reported placement; ``rests``: ``(k, 3)`` down
     direction of each cluster of settled drops, with ``rest_counts`` drops each and ``rest_match`` the
-    index of the matching placement (-1: *missed*; -2: *below margin*, a facet the planner refused on
-    purpose because it holds the part with ``d / h`` below the margin); ``rest_stays``: a rest on no
-    placement, released tilted just past the margin's angle, settled back in it for every tilt axis
-    (True for matched rests; False: *fragile*). Per placement: ``stays``, the releases tilted just
+    index of the matching placement (-1: none; -2: none, but a facet the planner refused on purpose);
+    ``rest_stays``: a rest on no placement, released tilted just past the margin's angle, settled back
+    in it for every tilt axis (True for matched rests). A rest on no placement is *missed* when it keeps
+    the part so (a robust rest the planner lacks), *fragile* when the part leaves it (refusing it is
+    what the margin rule is for). Per placement: ``stays``, the releases tilted just
     within the margin's angle all settled back in it; ``rolled``, they settled elsewhere at the same COM
     height (within 5 %) instead (a part on a curved side rolls along it: neutral); neither:
     *spurious*; ``release_error_deg``, the farthest they settled, degrees from the placement. ``unsettled``: drops still
@@ -109,18 +110,18 @@ class DropReport:
 
     @property
     def missed(self) -> int:
-        """Rests that match no reported placement (nor a facet refused on purpose)."""
-        return int(np.sum(self.rest_match == -1))
+        """Rests on no reported placement that hold the part even tilted past the margin's angle."""
+        return int(np.sum((self.rest_match < 0) & self.rest_stays))
+
+    @property
+    def fragile(self) -> int:
+        """Rests on no reported placement that the part leaves when tilted past the margin's angle."""
+        return int(np.sum((self.rest_match < 0) & ~self.rest_stays))
 
     @property
     def below_margin(self) -> int:
-        """Rests on facets the planner refused on purpose (``d / h`` below its margin)."""
+        """Rests on facets the planner refused on purpose (given as ``refused_normals``)."""
         return int(np.sum(self.rest_match == -2))
-
-    @property
-    def below_margin_fragile(self) -> int:
-        """Below-margin rests that a small tilt knocks the part out of (what the margin rule is for)."""
-        return int(np.sum((self.rest_match == -2) & ~self.rest_stays))
 
     @property
     def spurious(self) -> int:
@@ -141,9 +142,8 @@ class DropReport:
         """One line: reported, found, matched, missed, spurious."""
         return (
             f"reported {self.reported}, rests {self.found} ({self.drops} drops, {self.unsettled} unsettled), "
-            f"matched {self.matched}, missed {self.missed}, below margin {self.below_margin} "
-            f"({self.below_margin_fragile} fragile), "
-            f"spurious {self.spurious}, rolled {self.rolled_away}"
+            f"matched {self.matched}, missed {self.missed}, fragile {self.fragile} "
+            f"({self.below_margin} on refused facets), spurious {self.spurious}, rolled {self.rolled_away}"
         )
 
 
@@ -299,7 +299,7 @@ def drop_test(
     center_of_mass : part frame, metres; default the mesh's.
     refused_normals : ``(Q, 3)`` part-frame down directions the planner refused on purpose (facets that
         hold the COM with ``d / h`` below its margin); a rest matching none of the placements but one of
-        these is counted as *below margin* rather than missed.
+        these is labelled -2 in ``rest_match`` (missed or fragile is decided by releasing it).
     drops : random orientations dropped (seeded by ``seed``).
     min_margin : the margin ``d / h`` the placements claim. Each placement is released tilted by
         ``0.8 atan(min_margin)`` (4.6 degrees) about ``directions`` horizontal axes and must settle back
