@@ -11,11 +11,15 @@ Two experiments on one part, both in a headless PyBullet world (z up, plane z = 
   ``directions`` horizontal axes, let down quasi-statically (heavily damped,
   so it does not rock past its rest: the margin is a static promise), then
   simulated as a drop; it *stays put* when every release settles back in it.
-  Each rest the drops found on no reported placement is released the same
+  A part on a curved side may instead roll along it (a cylinder's strips
+  are a neutral family): a release that ends elsewhere with the COM at the
+  same height (within 5 %) is *rolled*, one where the COM fell is
+  *spurious*. Each rest the drops found on no reported placement is released the same
   way tilted by ``1.2 atan(min_margin)`` (6.9 degrees; with 8 axes the
   worst one is within 22.5 degrees of the nearest edge, so the tilt toward
   it is at least 6.3 degrees, past 5.7): when the part leaves it for some
-  axis, the rest is *fragile*, as the rule says it is.
+  axis, the rest is *fragile*, as the rule says it is; when it keeps the
+  part, the rest is robust and the planner *missed* it.
 
 Collision shape: the convex hull of the mesh. Only the hull can touch a
 plane (any point of the part that touches the plane is a point of the hull

@@ -85,6 +85,8 @@ class FacetStability:
     else the signed distance (negative) to the nearest edge line; ``stable``: a rest (holds and
     rolls to no lower neighbour) with ``margin >= min_margin``; ``rolls``: a rest whose basin has
     other facets (a curve);
+    ``basin``: label of the basin each facet ends in (rests with one label are one neutral family,
+    e.g. the strips of a cylinder on its side: a consumer may keep a few of them);
     ``holds``: the COM projection is inside (a sink of the toppling graph);
     ``topple_to``: the rest the part ends on from this facet, toppling and rolling down (itself for rests);
     ``solid_angle``: steradians seen from the COM; ``probability``: of ending on each facet.
@@ -95,6 +97,7 @@ class FacetStability:
     margin: np.ndarray
     stable: np.ndarray
     rolls: np.ndarray
+    basin: np.ndarray
     holds: np.ndarray
     topple_to: np.ndarray
     solid_angle: np.ndarray
@@ -240,6 +243,7 @@ def facet_stability(
         margin=margin,
         stable=stable,
         rolls=rolls,
+        basin=basin,
         holds=holds,
         topple_to=root,
         solid_angle=solid,

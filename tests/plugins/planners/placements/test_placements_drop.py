@@ -58,6 +58,7 @@ def test_rolling_rests_of_a_cylinder_and_the_tall_post_still_refused() -> None:
     side = [i for i, p in enumerate(lying.placements) if abs(down_normal(p.T_table_part)[2]) < 1e-6]
     assert len(side) == 64  # every strip: d/h = 0.049 across it, but the strips are one neutral family
     assert all(lying.stability.rolls[lying.facet_of_placement[i]] for i in side)
+    assert len({int(lying.stability.basin[lying.facet_of_placement[i]]) for i in side}) == 1  # one family
     # Measured to the end caps instead: d/h = 0.05 / 0.01 (COM height 0.01 * cos(pi / 64)).
     assert lying.placements[side[0]].margin == pytest.approx(0.05 / (0.01 * np.cos(np.pi / 64)), rel=1e-6)
     post = plan_placements(trimesh.creation.cylinder(radius=0.004, height=0.1, sections=64))
