@@ -222,6 +222,8 @@ class _Cluster:
     icp_sub: np.ndarray
     table: TablePlane
     eye: np.ndarray
+    judged: list[np.ndarray] = field(default_factory=list)
+    """Poses the hull-twin pass verified and judged by the ray evidence (the near-twin pass leaves them alone)."""
 
 
 @dataclass
@@ -482,6 +484,7 @@ class CvfhIcpDetector(Detector):
             if not v.accepted:
                 continue
             verified += 1
+            job.judged += [T, best.T_world_part]
             ev = disagreement(best.T_world_part, T, job.cluster, job.eye, prep.model, s.twin_fit, s.twin_off)
             verdict = ev.verdict(s.twin_min_points, s.twin_ratio)
             if verdict == "b" or (verdict == "ambiguous" and v.score > best.score):
@@ -509,8 +512,9 @@ class CvfhIcpDetector(Detector):
         """
         s = self.settings
         found = [best]
-        # Hull twins were judged by their own pass (found with details["ambiguous"] when the view cannot tell).
-        judged = [best.T_world_part @ H for H in prep.twins]
+        # Hull twins the hull pass verified were judged there (found with details["ambiguous"] when the view
+        # cannot tell); the ones it could not verify (its ICP is fine-only) get a full ICP here.
+        judged = list(job.judged)
         for S in prep.near:
             T = icp_refine(job.icp_in, prep.model, best.T_world_part @ S, s.refine)
             clock.lap("icp")
