@@ -71,6 +71,7 @@ class HoldSimulator:
         timestep: float = 1.0 / 240.0,
         hand_mass: float = 0.8,
         finger_mass: float = 0.05,
+        min_part_mass: float = 0.02,
     ) -> None:
         self.hand = hand
         self.part = part
@@ -78,6 +79,10 @@ class HoldSimulator:
         self.dt = float(timestep)
         self.hand_mass = hand_mass
         self.finger_mass = finger_mass
+        # Bullet cannot keep a part of a gram or two from being pushed into 40 N fingers (the mass ratio): the
+        # jaws close through it and it then hangs on the interpenetration. Such parts are simulated at this
+        # mass, which only makes holding them harder (more weight for the same friction).
+        self.min_part_mass = float(min_part_mass)
         self.client = pybullet.connect(pybullet.DIRECT)
         # the project's one convex decomposition (exact for solids and CAD meshes), as closed hulls
         self.pieces = decompose(part).hulls()
@@ -98,7 +103,7 @@ class HoldSimulator:
     def _spawn_part(self, T_world_part: np.ndarray) -> int:
         c = self.client
         vols = np.array([max(float(p.volume), 1e-12) for p in self.pieces])
-        masses = self.part.mass * vols / vols.sum()
+        masses = max(self.part.mass, self.min_part_mass) * vols / vols.sum()
         shapes, frames = [], []
         for p in self.pieces:
             centre = np.asarray(p.center_mass if p.is_volume else p.centroid, dtype=float)
@@ -269,8 +274,14 @@ class HoldSimulator:
             or len(pybullet.getClosestPoints(gripper, part, 5e-4, linkIndexA=j, physicsClientId=c)) > 0
             for j in (0, 1)
         ]
-        held = risen >= 0.8 * lift and all(touching)
-        reason = "" if held else ("dropped" if risen < 0.8 * lift else "lost contact with a finger")
+        # The jaws closed to under half the grasp's width: they went through the part, whatever it did after.
+        q = [pybullet.getJointState(gripper, j, physicsClientId=c)[0] for j in (0, 1)]
+        through = (q[1] - q[0]) < 0.5 * grasp.width
+        held = risen >= 0.8 * lift and all(touching) and not through
+        reason = "" if held else (
+            "dropped" if risen < 0.8 * lift else "fingers closed through the part" if through
+            else "lost contact with a finger"
+        )
         return HoldResult(held=held, lift=risen, drift=drift, drift_angle=angle, reason=reason)
 
     def _drive(self, constraint: int, position: np.ndarray, orientation: list[float]) -> None:
