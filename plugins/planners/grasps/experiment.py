@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from pydantic import Field
 
+from asmteach.core.convex_pieces import pieces_volume_error
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
 from asmteach.core.io import atomic_path, write_text
@@ -24,7 +25,6 @@ from asmteach.core.models import StrictModel
 from asmteach.core.parts import build_part, load_structure
 from asmteach.core.sweep import Experiment, to_markdown
 from asmteach.plugins.planners.grasps.commands import load_hand
-from asmteach.plugins.planners.grasps.convex import pieces_volume_error
 from asmteach.plugins.planners.grasps.hold_check import HoldSimulator
 from asmteach.plugins.planners.grasps.planner import AntipodalGraspPlanner
 

@@ -4,11 +4,10 @@ One PyBullet client per instance (``bullet_client.BulletClient``), never the
 global one, so several robots can live in one process. Headless (DIRECT) by
 default; GUI when asked and a display exists.
 
-Parts are spawned from their trimesh meshes: a convex part gets one convex
-hull (PyBullet builds it from the vertices); a concave part is decomposed with
-PyBullet's built-in V-HACD (``p.vhacd``) into convex pieces, loaded as one
-compound collision shape from the decomposition's OBJ file. The visual shape
-is always the exact mesh.
+Parts collide as the convex pieces of :func:`asmteach.core.convex_pieces.decompose`
+(exact for parametric solids and for meshes the plane split handles, CoACD
+with measured fidelity otherwise), loaded as one compound collision shape
+from an OBJ file; the visual shape is always the exact mesh.
 
 Poses: ``T_world_part`` is the part frame (its mesh frame), not PyBullet's
 centre-of-mass frame; the conversion is done here. Units: metres, radians,
