@@ -190,12 +190,22 @@ def test_plan_insertion_aims_b_at_an_a_seen_off_its_goal(peg_in_hole_plan) -> No
     first = next(s for s in res.plan.segments if s.trajectory is not None).trajectory
     np.testing.assert_allclose(first.positions[0], q_now[first.arm], atol=1e-6)
     np.testing.assert_allclose(res.T_world_b_goal, T_seen @ task.T_A_B, atol=1e-12)
-    # B is held as it was picked (no regrasp: it stands on its shank) and ends at the assembled pose in the A seen
+    # B ends at the assembled pose in the A seen: follow B through each pick and place (a regrasp, when the
+    # grasp set makes one the planner's choice) to the grasp it is inserted with
     segs = res.plan.segments
-    k_close = next(k for k, s in enumerate(segs) if s.gripper is not None and s.gripper.action == "close")
-    approach = next(s for s in reversed(segs[:k_close]) if s.trajectory is not None).trajectory
-    T_b_tcp = np.linalg.inv(p.T_b) @ robot.fk(approach.arm, np.asarray(approach.positions)[-1])
-    insert = next(s for s in segs if s.label.startswith("insert")).trajectory
+    k_insert = next(k for k, s in enumerate(segs) if s.label.startswith("insert"))
+    T_b_world, T_b_tcp = p.T_b, None
+    for k, seg in enumerate(segs[:k_insert]):
+        if seg.gripper is None:
+            continue
+        last = next(s for s in reversed(segs[:k]) if s.trajectory is not None).trajectory
+        T_tcp = robot.fk(last.arm, np.asarray(last.positions)[-1])
+        if seg.gripper.action == "close":
+            T_b_tcp = np.linalg.inv(T_b_world) @ T_tcp
+        elif T_b_tcp is not None:  # let go just above the table, B lands on it (table top z = 0)
+            T_b_world = T_tcp @ np.linalg.inv(T_b_tcp)
+            T_b_world[2, 3] -= geometry.transform_points(T_b_world, p.b.mesh.vertices)[:, 2].min()
+    insert = segs[k_insert].trajectory
     T_b_end = robot.fk(insert.arm, np.asarray(insert.positions)[-1]) @ np.linalg.inv(T_b_tcp)
     err = geometry.invert(res.T_world_b_goal) @ T_b_end
     assert np.linalg.norm(err[:3, 3]) < 2e-4
@@ -268,7 +278,8 @@ def test_keyframe_sequences_failing_at_a_straight_line_never_reach_the_motion_pl
         res = registry.create("assembly_planners", "regrasp", {}, seed=0).plan(problem, robot, motion,
                                                                               progress=messages.append)
         assert res.success, res.reason
-        assert sum("insertion at assembled: collision" in m for m in messages) >= 3
+        # with the soft-pad grasp set (session 11) one of B's sequences meets A at its insertion (eight before)
+        assert sum("insertion at assembled: collision" in m for m in messages) >= 1
         assert any("goal in collision" in m for m in messages)
         free = [s for s in res.plan.segments if s.trajectory is not None
                 and (s.label.startswith(("move to pre-grasp", "carry")) or s.label.endswith("home"))]
