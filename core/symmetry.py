@@ -53,7 +53,15 @@ from scipy.spatial.transform import Rotation
 
 from asmteach.core import geometry
 
-__all__ = ["SymmetryFinder", "axis_rotations", "part_symmetries", "principal_frame", "symmetry_yaws"]
+__all__ = [
+    "SymmetryFinder",
+    "axis_rotations",
+    "equivalent_transforms",
+    "nearest_equivalent_error",
+    "part_symmetries",
+    "principal_frame",
+    "symmetry_yaws",
+]
 
 # A vertex is a sharp corner when the smallest eigenvalue of the mean n n^T of its faces'
 # unit normals exceeds this (0 on a plane or a crease; 1/3 at a box corner).
@@ -390,3 +398,29 @@ def part_symmetries(mesh: trimesh.Trimesh, com: np.ndarray, tol: float = 0.0005,
         if not any(geometry.rotation_distance(R, S) < _SAME_RAD for S in found) and finder.maps(R):
             found.append(R)
     return [geometry.from_rotation(R, com - R @ com) for R in found]
+
+
+def equivalent_transforms(mesh: trimesh.Trimesh, com: np.ndarray, tol: float = 0.0005) -> np.ndarray:
+    """Part-frame transforms ``(m, 4, 4)`` that map the part onto itself (about the centre of mass).
+
+    :func:`part_symmetries`, whose surfaces of revolution get turns in 10 deg steps only (an error could
+    keep 5 deg of a turn that changes nothing), times every 1 deg turn about the axis of revolution when
+    the part has one (a principal axis about which turns of 7 and 31 deg map it onto itself).
+    """
+    group = np.asarray(part_symmetries(mesh, com, tol))
+    finder = SymmetryFinder(mesh, np.asarray(mesh.convex_hull.vertices), com, tol=tol, corners=False)
+    for axis in principal_frame(mesh).T:
+        if all(finder.maps(R) for R in axis_rotations(axis, np.radians([7.0, 31.0]))):
+            turns = [geometry.from_rotation(R, com - R @ com) for R in axis_rotations(axis, np.radians(np.arange(360)))]
+            return np.einsum("aij,bjk->abik", group, np.asarray(turns)).reshape(-1, 4, 4)
+    return group
+
+
+def nearest_equivalent_error(T_est: np.ndarray, T_true: np.ndarray, syms: np.ndarray) -> tuple[float, float]:
+    """``(mm, deg)`` of ``T_est`` against the nearest ``T_true @ S`` (the same solid in the same place)."""
+    eq = np.einsum("ij,sjk->sik", T_true, syms)
+    pos = 1000.0 * np.linalg.norm(eq[:, :3, 3] - T_est[:3, 3], axis=1)
+    cos = (np.einsum("ij,sij->s", T_est[:3, :3], eq[:, :3, :3]) - 1.0) / 2.0
+    rot = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    i = int(np.argmin(pos + rot))
+    return float(pos[i]), float(rot[i])

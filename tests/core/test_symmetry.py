@@ -64,3 +64,18 @@ def test_every_corpus_part_gets_a_group_that_maps_its_surface_onto_itself() -> N
             assert np.isclose(np.linalg.det(S[:3, :3]), 1.0), part.name
             moved = geometry.transform_points(S, pts).astype(np.float32)
             assert float(scene.compute_distance(o3d.core.Tensor(moved)).numpy().max()) < 0.0006, part.name
+
+
+def test_a_tube_is_equivalent_under_every_turn_about_its_axis_and_errors_see_it() -> None:
+    from asmteach.core.symmetry import equivalent_transforms, nearest_equivalent_error
+
+    tube = corpus_part("tube_2").mesh
+    com = tube.center_mass
+    eq = equivalent_transforms(tube, com)
+    assert len(eq) >= 360
+    turned = geometry.from_rotation(geometry.rot_z(np.radians(13.0))[:3, :3], com - geometry.rot_z(
+        np.radians(13.0))[:3, :3] @ com)
+    mm, deg = nearest_equivalent_error(turned, np.eye(4), eq)  # 13 deg about the axis: the same tube
+    assert mm < 0.01 and deg < 0.6
+    mm, deg = nearest_equivalent_error(geometry.from_rpy(0.2, 0, 0), np.eye(4), eq)  # tilted: not the same
+    assert deg > 5.0

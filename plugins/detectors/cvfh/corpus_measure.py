@@ -1,0 +1,107 @@
+"""The detection stage of the ``part_corpus`` experiment, and the scenes ``benchmarks/detection_corpus.py`` runs.
+
+Each scene puts the part's true mesh in one of its stable rests (trimesh's,
+drawn by probability) at a seeded yaw and position on the table, renders it
+with the scene Kinect (noise on) and runs the detector on the part as it was
+loaded (a user's CAD STL, repaired), the camera centre as the viewpoint.
+Errors are symmetry-aware (:func:`asmteach.core.symmetry.equivalent_transforms`,
+turns about an axis of revolution included): position of the part origin in
+mm, geodesic rotation in degrees, of the rough pose. A scene succeeds when
+the pose is found within 5 mm / 5 deg; a pose found farther off is *wrong*.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+
+from asmteach.core import registry
+from asmteach.core.config import TableSettings
+from asmteach.core.hooks import hookimpl
+from asmteach.core.interfaces import Detector, PartModel
+from asmteach.core.symmetry import equivalent_transforms, nearest_equivalent_error
+from asmteach.plugins.detectors.cvfh.scenes import default_camera_pose, place_on_table, render_table_scene
+from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings
+
+__all__ = ["AREA", "asmteach_measure_part", "rest_poses", "run_part", "scene_pose"]
+
+AREA = (0.24, 0.34)
+"""Work-area extent (x, y, metres) the part's centre is drawn from, around the work centre (0.45, 0)."""
+
+
+def rest_poses(mesh: trimesh.Trimesh, com: np.ndarray, min_share: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """``(T_table_part (k, 4, 4), probability (k,))`` of trimesh's stable rests, those below ``min_share`` of the
+    likeliest dropped (a tube's side is 64 facets of 1.5 % each: the threshold is relative)."""
+    T, p = trimesh.poses.compute_stable_poses(mesh, center_mass=np.asarray(com, float))
+    T, p = np.asarray(T, float), np.asarray(p, float)
+    keep = p >= min_share * p.max()
+    return T[keep], p[keep] / p[keep].sum()
+
+
+def scene_pose(mesh: trimesh.Trimesh, rests: np.ndarray, probs: np.ndarray, rng: np.random.Generator,
+               table: TableSettings) -> tuple[int, float, np.ndarray]:
+    """``(rest index, yaw rad, T_world_part)`` of one scene: a rest drawn by probability, yaw and xy uniform."""
+    k = int(rng.choice(len(rests), p=probs))
+    yaw = float(rng.uniform(-np.pi, np.pi))
+    xy = np.array([0.45, 0.0]) + rng.uniform(-0.5 * np.asarray(AREA), 0.5 * np.asarray(AREA))
+    return k, yaw, place_on_table(mesh, rests[k], yaw, xy, table.height)
+
+
+def run_part(name: str, mesh: trimesh.Trimesh, part: PartModel, detector: Detector, scenes: int, seed: int,
+             tol_mm: float = 5.0, tol_deg: float = 5.0) -> list[dict]:
+    """Render ``scenes`` scenes of ``mesh`` (the truth) and detect ``part`` (as loaded) in each."""
+    table = TableSettings()
+    com = np.asarray(mesh.center_mass, float)
+    rests, probs = rest_poses(mesh, com)
+    syms = equivalent_transforms(mesh, com)
+    T_cam = default_camera_pose(table)
+    t0 = time.perf_counter()
+    detector.prepare(part)
+    prep_s = time.perf_counter() - t0
+    rows = []
+    for i in range(scenes):
+        rng = np.random.default_rng([seed, i, 22])
+        k, yaw, T_true = scene_pose(mesh, rests, probs, rng, table)
+        scene = render_table_scene(DepthCamera(KinectSettings(), seed=1000 * seed + i), mesh, T_true,
+                                   table=table, T_world_cam=T_cam)
+        det = detector.detect(scene.cloud, part, viewpoint=T_cam[:3, 3])
+        row = {"part": name, "scene": i, "rest": k, "yaw_deg": round(math.degrees(yaw), 1),
+               "part_points": int((scene.frame.labels == 1).sum()), "found": det.found,
+               "pos_mm": None, "rot_deg": None, "success": False, "wrong_found": False,
+               "reason": det.reason or "", "source": det.details.get("source", ""),
+               "detect_ms": det.timing_ms.get("total"), "prepare_s": round(prep_s, 1) if i == 0 else 0.0,
+               "symmetries": len(syms)}
+        alts = [np.asarray(a["T_world_part"]) for a in det.details.get("ambiguous", [])]
+        row["alternatives"] = len(alts)  # hull twins the view cannot tell apart, listed with the found pose
+        row["truth_in_alternatives"] = any(
+            np.all(np.array(nearest_equivalent_error(T, T_true, syms)) <= (tol_mm, tol_deg)) for T in alts)
+        if det.found and det.rough is not None:
+            mm, deg = nearest_equivalent_error(det.rough, T_true, syms)
+            ok = mm <= tol_mm and deg <= tol_deg
+            row.update(pos_mm=round(mm, 2), rot_deg=round(deg, 2), success=ok, wrong_found=not ok)
+        rows.append(row)
+    return rows
+
+
+@hookimpl
+def asmteach_measure_part(part: PartModel, stage: str, seed: int, workdir: Path,
+                          options: dict[str, Any]) -> dict[str, Any] | None:
+    """Detection on ``options["scenes"]`` seeded scenes of ``part``; ``None`` for other stages."""
+    if stage != "detection":
+        return None
+    detector = registry.create("detectors", str(options.get("detector", "cvfh_icp")), {}, seed=seed)
+    rows = run_part(part.name, part.mesh, part, detector, int(options.get("scenes", 5)), seed)
+    return {
+        "scenes": len(rows),
+        "found": sum(r["found"] for r in rows),
+        "success": sum(r["success"] for r in rows),
+        "wrong_found": sum(r["wrong_found"] for r in rows),
+        "max_pos_mm_found": max((r["pos_mm"] for r in rows if r["found"]), default=0.0),
+        "max_rot_deg_found": max((r["rot_deg"] for r in rows if r["found"]), default=0.0),
+        "reasons": "; ".join(sorted({r["reason"][:80] for r in rows if not r["found"]})),
+    }
