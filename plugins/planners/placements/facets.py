@@ -41,6 +41,7 @@ import trimesh
 from scipy.spatial import ConvexHull, QhullError
 
 from asmteach.core.errors import UserError
+from asmteach.core.geometry import cross  # re-exported: the placements modules take it from here
 
 __all__ = ["MERGE_DIST_REL", "Hull", "SupportFacets", "convex_hull", "cross", "is_closed", "support_facets"]
 
@@ -48,17 +49,6 @@ __all__ = ["MERGE_DIST_REL", "Hull", "SupportFacets", "convex_hull", "cross", "i
 # vertices lie within it of a facet's plane are that facet (0.02 mm on a 200 mm part: far below what a
 # table or a gripper can tell apart, far above the float32 rounding of an STL).
 MERGE_DIST_REL = 1e-4
-
-
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of ``(..., 3)`` arrays.
-
-    The same as :func:`numpy.cross`, whose axis handling costs tens of
-    microseconds per call: more than the arithmetic on a small hull.
-    """
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 @dataclass
