@@ -37,8 +37,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from asmteach.core.errors import UserError
+from asmteach.core.io import write_text
 
-__all__ = ["ResolvedUrdf", "find_package", "package_name", "resolve_urdf", "resolve_uri", "strip_xacro"]
+__all__ = ["ResolvedUrdf", "find_package", "package_name", "resolve_urdf", "resolve_uri", "strip_xacro", "write_urdf"]
 
 XACRO_NS = "http://www.ros.org/wiki/xacro"
 NATIVE_MESHES = {".stl", ".obj"}
@@ -219,10 +220,16 @@ def resolve_urdf(urdf: str | Path, package_paths: Sequence[str | Path] = (), *,
     for e in mesh_elems:
         e.set("filename", str(meshes[e.get("filename", "")]))
     ET.register_namespace("xacro", XACRO_NS)
-    dst_urdf = out / f"{src.stem}.resolved.urdf"
-    text = ET.tostring(root, encoding="unicode")
-    if not dst_urdf.is_file() or dst_urdf.read_text(encoding="utf-8") != text:
-        tmp = dst_urdf.with_suffix(".tmp")
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(dst_urdf)
+    dst_urdf = write_urdf(root, out / f"{src.stem}.resolved.urdf")
     return ResolvedUrdf(source=src, path=dst_urdf, meshes=meshes, packages=packages, stripped=stripped)
+
+
+def write_urdf(root: ET.Element, path: Path) -> Path:
+    """Write the URDF tree ``root`` to ``path`` atomically, unless the file already holds the same text.
+
+    Unchanged files are left alone, so pinocchio and PyBullet in other processes never see one half-written.
+    """
+    text = ET.tostring(root, encoding="unicode")
+    if not path.is_file() or path.read_text(encoding="utf-8") != text:
+        write_text(path, text)
+    return path

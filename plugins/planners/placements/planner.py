@@ -38,6 +38,7 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Placement
 from asmteach.core.parts import mesh_hash
+from asmteach.core.symmetry import SymmetryFinder, symmetry_yaws
 from asmteach.plugins.planners.placements.facets import (
     MERGE_DIST_REL,
     Hull,
@@ -47,7 +48,6 @@ from asmteach.plugins.planners.placements.facets import (
     support_facets,
 )
 from asmteach.plugins.planners.placements.stability import FacetStability, facet_stability
-from asmteach.plugins.planners.placements.symmetry import SymmetryFinder, symmetry_yaws
 
 __all__ = [
     "NO_TOPPLE_MARGIN",

@@ -29,7 +29,7 @@ import trimesh
 
 from asmteach.core import geometry
 from asmteach.core.errors import UserError
-from asmteach.core.urdf import resolve_urdf
+from asmteach.core.urdf import resolve_urdf, write_urdf
 from asmteach.plugins.robots.nextage.build_urdf import GRIPPER, MATERIALS, gripper_xml
 
 __all__ = ["ARM_PREFIXES", "cut_at_flange", "vendor_urdf"]
@@ -115,10 +115,4 @@ def vendor_urdf(urdf: str | Path, package_paths: Sequence[str | Path] = ()) -> P
     extra = "\n".join([*MATERIALS, *(x for pre in ARM_PREFIXES for x in gripper_xml(pre, f"{pre}_JOINT5_Link"))])
     for elem in ET.fromstring(f"<robot>{extra}</robot>"):
         root.append(elem)
-    dst_urdf = out_dir / f"{res.source.stem}.with_gripper.urdf"
-    text = ET.tostring(root, encoding="unicode")
-    if not dst_urdf.is_file() or dst_urdf.read_text(encoding="utf-8") != text:
-        tmp = dst_urdf.with_suffix(".tmp")
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(dst_urdf)
-    return dst_urdf
+    return write_urdf(root, out_dir / f"{res.source.stem}.with_gripper.urdf")
