@@ -8,8 +8,9 @@ the key path and the reason, e.g.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 from pydantic import BaseModel, Field, ValidationError
 
@@ -22,6 +23,7 @@ __all__ = [
     "PluginChoice",
     "RunConfig",
     "TableSettings",
+    "check_finite",
     "format_validation_error",
     "load_run_config",
     "validate_settings",
@@ -35,12 +37,25 @@ class PluginChoice(StrictModel):
     settings: dict[str, Any] = Field(default_factory=dict)
 
 
+Coordinate = Annotated[float, Field(ge=-5.0, le=5.0)]
+"""A world coordinate within 5 m of the origin (metres); NaN fails the bounds."""
+Extent = Annotated[float, Field(gt=0.0, le=5.0)]
+"""A positive length up to 5 m (metres); NaN fails the bounds."""
+
+
 class TableSettings(StrictModel):
-    """The work table in front of the robot (world frame, metres)."""
+    """The work table in front of the robot (world frame, metres).
+
+    ``center`` and ``size``, when given, are the robot's table: the run loader
+    (:mod:`asmteach.core.run_setup`) hands them to the robot plugin's
+    ``table_center`` / ``table_size`` settings and checks that the parts'
+    start region lies on it. Left out, the robot's own table is used.
+    """
 
     height: float = Field(0.0, ge=-2.0, le=2.0, description="table top z in the world frame")
-    center: tuple[float, float] = Field((0.45, 0.0), description="table centre x, y")
-    size: tuple[float, float] = Field((0.8, 1.2), description="table extent along x, y")
+    center: tuple[Coordinate, Coordinate] | None = Field(
+        None, description="table centre x, y; default: the robot plugin's own")
+    size: tuple[Extent, Extent] | None = Field(None, description="table extent along x, y; default: the robot's own")
 
 
 class RunConfig(StrictModel):
@@ -91,6 +106,19 @@ def _fmt_loc(loc: tuple[Any, ...]) -> str:
     return out
 
 
+MAX_ECHO = 40
+"""Longest input value quoted back in an error; a longer text is described, never printed (it may be a file's
+contents read by mistake, such as ``--hand /etc/passwd``)."""
+
+
+def _echo(value: Any) -> str:
+    """``value`` for an error message: short values as written, long texts by their length only."""
+    if isinstance(value, str | bytes) and (len(value) > MAX_ECHO or "\n" in str(value)):
+        return f"a text of {len(value)} characters"
+    text = repr(value)
+    return text if len(text) <= MAX_ECHO else f"a {type(value).__name__}"
+
+
 def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
     """First error of a pydantic ``ValidationError`` as ``key.path: reason (got value)``."""
     lines = []
@@ -102,12 +130,41 @@ def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
             msg = "unknown key (not a setting of this section; check the spelling)"
         elif err["type"] == "missing":
             msg = "required key is missing"
+        elif err["type"] in ("model_type", "dict_type", "model_attributes_type"):
+            # the whole section (or file) is not a mapping; its text is not echoed
+            got = type(err.get("input")).__name__
+            msg = f"expected a mapping of keys and values, got a {'text' if got == 'str' else got}"
         elif "input" in err and not isinstance(err["input"], dict | list):
-            msg = f"{msg} (got {err['input']!r})"
+            msg = f"{msg} (got {_echo(err['input'])})"
         msg = msg.removeprefix("Value error, ")
         lines.append(f"{path or '<root>'}: {msg}")
     more = f" (and {len(lines) - 1} more)" if len(lines) > 1 else ""
     return lines[0] + more
+
+
+def check_finite(tree: Any, where: str = "") -> None:
+    """:class:`UserError` naming the key path of the first NaN or infinity in a tree read from YAML.
+
+    YAML writes them ``.nan`` / ``.inf``; no setting of asmteach takes one, and
+    a NaN passes every ``>``/``<`` bound check unnoticed, so they are refused
+    wherever they are (plugin settings included).
+    """
+
+    def walk(node: Any, path: str) -> str | None:
+        if isinstance(node, float) and not math.isfinite(node):
+            return path or "<root>"
+        items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
+        for k, v in items:
+            sub = f"{path}[{k}]" if isinstance(k, int) else ".".join(x for x in (path, str(k)) if x)
+            found = walk(v, sub)
+            if found is not None:
+                return found
+        return None
+
+    bad = walk(tree, "")
+    if bad is not None:
+        prefix = f"{where}: " if where else ""
+        raise UserError(f"{prefix}{bad}: not a finite number (NaN or infinity); write a number")
 
 
 def validate_settings(cls: type[Plugin], settings: dict[str, Any], *, where: str) -> BaseModel:
@@ -132,6 +189,7 @@ def load_run_config(
         raise UserError(f"{p}: a config must be a YAML mapping at the top level")
     for key, value in (overrides or {}).items():
         set_dotted(raw, key, value)
+    check_finite(raw, str(p))
     try:
         cfg = RunConfig.model_validate(raw)
     except ValidationError as exc:

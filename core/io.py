@@ -8,6 +8,7 @@ one, never half of one.
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import tempfile
@@ -24,6 +25,9 @@ __all__ = [
     "append_jsonl",
     "atomic_path",
     "cache_root",
+    "check_out_dir",
+    "check_out_file",
+    "describe_os_error",
     "read_jsonl",
     "read_yaml",
     "to_jsonable",
@@ -43,6 +47,62 @@ def cache_root() -> Path:
     if os.environ.get("ASMTEACH_CACHE_DIR"):
         return Path(os.environ["ASMTEACH_CACHE_DIR"])
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "asmteach"
+
+
+def describe_os_error(exc: OSError) -> str:
+    """``"<file>: <reason>; <what to do>"`` for an error of the file system, in one line."""
+    where = exc.filename or "a file"
+    reason = exc.strerror or type(exc).__name__
+    fix = {
+        errno.ENOSPC: "free some space and re-run; what was written before is intact",
+        errno.EDQUOT: "free some space (disk quota) and re-run; what was written before is intact",
+        errno.EROFS: "the file system is read-only; give a writable folder",
+        errno.EACCES: "no permission to write there; give a writable folder",
+        errno.EPERM: "no permission to write there; give a writable folder",
+        errno.ENOTDIR: "a part of the path is a file, not a folder",
+        errno.EISDIR: "it is a folder; give a file name",
+    }.get(exc.errno or 0, "check the path")
+    return f"{where}: {reason}; {fix}"
+
+
+def _probe_writable(folder: Path, flag: str) -> None:
+    """:class:`UserError` unless a file can be created in ``folder`` (the probe is removed at once)."""
+    try:
+        fd, name = tempfile.mkstemp(prefix=".asmteach-probe-", dir=folder)
+        os.close(fd)
+        os.unlink(name)
+    except OSError as exc:
+        raise UserError(f"{flag} {folder}: cannot write there ({exc.strerror}); give a writable folder") from None
+
+
+def check_out_dir(path: str | os.PathLike[str], *, flag: str = "--out") -> Path:
+    """Make sure ``path`` is (or can be made) a writable folder; returns it.
+
+    Called before any work starts, so a read-only folder or an ``--out`` that
+    names a file costs one line (exit 2), not a run's worth of computing.
+    """
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise UserError(f"{flag} {p}: is a file, not a folder; give a folder (it is created if missing)")
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise UserError(f"{flag} {p}: a part of the path is a file, not a folder; give another folder") from None
+    except OSError as exc:
+        raise UserError(f"{flag} {p}: cannot create the folder ({exc.strerror}); give a writable folder") from None
+    _probe_writable(p, flag)
+    return p
+
+
+def check_out_file(path: str | os.PathLike[str], *, flag: str = "--out") -> Path:
+    """Make sure the file ``path`` can be written (its folder is made if missing); returns it."""
+    p = Path(path)
+    if p.is_dir():
+        raise UserError(f"{flag} {p}: is a folder; give a file name (e.g. {p / 'out.json'})")
+    if p.exists() and not os.access(p, os.W_OK):
+        raise UserError(f"{flag} {p}: the file is read-only; give another file")
+    check_out_dir(p.parent if str(p.parent) else Path("."), flag=f"{flag} {p}: folder")
+    return p
 
 
 @contextlib.contextmanager
@@ -111,17 +171,19 @@ def write_model(path: str | os.PathLike[str], model: BaseModel) -> Path:
 def append_jsonl(path: str | os.PathLike[str], record: dict[str, Any]) -> None:
     """Append one JSON line and fsync it, so a crash loses at most the line in flight."""
     line = json.dumps(record, allow_nan=True) + "\n"
-    with open(path, "a+b") as fh:
-        # A crash can leave a torn last line; start on a fresh line so the torn
-        # fragment stays alone (and is skipped) instead of swallowing this record.
-        fh.seek(0, os.SEEK_END)
-        if fh.tell() > 0:
-            fh.seek(-1, os.SEEK_END)
-            if fh.read(1) != b"\n":
-                line = "\n" + line
-        fh.write(line.encode("utf-8"))
-        fh.flush()
-        os.fsync(fh.fileno())
+    fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_APPEND, 0o666)
+    try:
+        # A crash (or a full disk) can leave a torn last line; start on a fresh line so the
+        # torn fragment stays alone (and is skipped) instead of swallowing this record.
+        size = os.lseek(fd, 0, os.SEEK_END)
+        if size > 0 and os.pread(fd, 1, size - 1) != b"\n":
+            line = "\n" + line
+        data = line.encode("utf-8")
+        while data:  # os.write may write part of it; the rest follows (or an OSError says why not)
+            data = data[os.write(fd, data):]
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def read_jsonl(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
@@ -144,10 +206,22 @@ def read_jsonl(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
 def read_yaml(path: str | os.PathLike[str]) -> Any:
     """Read a YAML file with ``yaml.safe_load``; errors become one-line :class:`UserError`."""
     p = Path(path)
+    if p.is_dir():
+        raise UserError(f"{p}: is a folder; give a YAML file")
     if not p.is_file():
         raise UserError(f"{p}: no such file")
     try:
-        return yaml.safe_load(p.read_text(encoding="utf-8"))
+        data = p.read_bytes()
+    except OSError as exc:
+        raise UserError(f"{p}: cannot read it ({exc.strerror})") from None
+    if b"\x00" in data[:65536]:
+        raise UserError(f"{p}: not a text file (binary data); give a YAML file")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise UserError(f"{p}: not UTF-8 text (bad byte at offset {exc.start}); save the YAML as UTF-8") from None
+    try:
+        return yaml.safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""

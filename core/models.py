@@ -54,33 +54,43 @@ __all__ = [
 
 
 # ---------------------------------------------------------------- array types
+def _finite_array(value: Any, what: str) -> np.ndarray:
+    """``value`` as a float array; ``ValueError`` naming ``what`` when it is not numbers or not finite."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be numbers") from None
+    if not np.all(np.isfinite(arr)):
+        # NaN slips through every comparison (a NaN pose passes the rotation check), so test it first.
+        raise ValueError(f"{what} must be finite numbers (no NaN or infinity)")
+    return arr
+
+
 def _to_mat4(value: Any) -> np.ndarray:
     if isinstance(value, dict):
         extra = set(value) - {"xyz", "rpy_deg"}
         if extra:
             raise ValueError(f"a pose given as a mapping takes keys xyz and rpy_deg, not {sorted(extra)}")
-        xyz = value.get("xyz", [0.0, 0.0, 0.0])
-        rpy_deg = value.get("rpy_deg", [0.0, 0.0, 0.0])
-        if len(xyz) != 3 or len(rpy_deg) != 3:
+        xyz = _finite_array(value.get("xyz", [0.0, 0.0, 0.0]), "xyz")
+        rpy_deg = _finite_array(value.get("rpy_deg", [0.0, 0.0, 0.0]), "rpy_deg")
+        if xyz.shape != (3,) or rpy_deg.shape != (3,):
             raise ValueError("xyz and rpy_deg need three numbers each")
-        return geometry.from_xyz_rpy(xyz, np.radians(np.asarray(rpy_deg, dtype=float)))
-    return geometry.as_transform(value)
+        return geometry.from_xyz_rpy(xyz, np.radians(rpy_deg))
+    return geometry.as_transform(_finite_array(value, "a pose"))
 
 
 def _to_vec(n: int):
     def convert(value: Any) -> np.ndarray:
-        arr = np.asarray(value, dtype=float)
+        arr = _finite_array(value, "values")
         if arr.shape != (n,):
             raise ValueError(f"expected {n} numbers, got shape {arr.shape}")
-        if not np.all(np.isfinite(arr)):
-            raise ValueError("values must be finite")
         return arr
 
     return convert
 
 
 def _to_mat3(value: Any) -> np.ndarray:
-    arr = np.asarray(value, dtype=float)
+    arr = _finite_array(value, "a 3x3 matrix")
     if arr.shape != (3, 3):
         raise ValueError(f"expected a 3x3 matrix, got shape {arr.shape}")
     return arr
@@ -124,6 +134,10 @@ FloatArray = Annotated[
     WithJsonSchema(_VEC_SCHEMA),
 ]
 """Any float array (shape kept); JSON: nested lists."""
+
+
+Unit = Annotated[float, Field(ge=0.0, le=1.0)]
+"""A number from 0 to 1 (a colour channel); NaN fails the bounds."""
 
 
 class StrictModel(BaseModel):
@@ -187,7 +201,7 @@ class PartSpec(StrictModel):
     density: float = Field(700.0, gt=0.0, description="kg/m^3; 700 is a hardwood block")
     mass: float | None = Field(None, gt=0.0, description="kg; overrides density * volume")
     center_of_mass: Vec3 | None = Field(None, description="part frame, metres; defaults to the solid's")
-    color: tuple[float, float, float] = (0.80, 0.62, 0.40)
+    color: tuple[Unit, Unit, Unit] = Field((0.80, 0.62, 0.40), description="RGB, each 0..1")
     markers: list[MarkerSpec] = Field(default_factory=list)
 
     @model_validator(mode="after")
@@ -208,6 +222,19 @@ class CameraIntrinsics(StrictModel):
     dist: list[float] = Field(default_factory=lambda: [0.0] * 5, description="OpenCV distortion coefficients")
     width: int = Field(gt=0, description="image width, pixels")
     height: int = Field(gt=0, description="image height, pixels")
+
+    @field_validator("K")
+    @classmethod
+    def _focal(cls, K: np.ndarray) -> np.ndarray:
+        if K[0, 0] <= 0 or K[1, 1] <= 0:
+            raise ValueError(f"the focal lengths fx, fy must be > 0 pixels (got {K[0, 0]:g}, {K[1, 1]:g})")
+        return K
+
+    @field_validator("dist")
+    @classmethod
+    def _finite_dist(cls, d: list[float]) -> list[float]:
+        _finite_array(d, "distortion coefficients")
+        return d
 
     @property
     def dist_array(self) -> np.ndarray:

@@ -17,7 +17,7 @@ import numpy as np
 import trimesh
 from pydantic import ValidationError
 
-from asmteach.core.config import format_validation_error
+from asmteach.core.config import check_finite, format_validation_error
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
 from asmteach.core.io import read_yaml
@@ -143,24 +143,38 @@ def _validate(model: type, data: Any, path: Path) -> Any:
 
 
 def load_part_spec(path: str | Path) -> PartSpec:
-    """Read a part YAML; a ``mesh`` path in it is made absolute."""
+    """Read a part YAML; a ``mesh`` path in it is made absolute (relative to the part file's folder)."""
     p = Path(path)
-    spec = _validate(PartSpec, read_yaml(p), p)
+    raw = read_yaml(p)
+    check_finite(raw, str(p))
+    spec = _validate(PartSpec, raw, p)
     if spec.mesh is not None:
         spec.mesh = str(resolve_relative(spec.mesh, p.resolve().parent))
     return spec
 
 
 def load_structure(path: str | Path) -> AssemblyTask:
-    """Read a structure YAML (an assembly task with ground truth)."""
+    """Read a structure YAML (an assembly task with ground truth).
+
+    Path rule, the same for every command (``run``, ``validate``, ``teach``,
+    ``render-demo``, ``placements``, ``detect``): a path is resolved against
+    the folder of the file that names it. ``part_a: parts/a.yaml`` is relative
+    to the structure file; a ``mesh`` inside that part file is relative to the
+    part file; a ``mesh`` of a part written inline is relative to the
+    structure file. The returned specs hold absolute mesh paths, so no later
+    step depends on the working directory.
+    """
     p = Path(path)
     raw = read_yaml(p)
     if not isinstance(raw, dict):
         raise UserError(f"{p}: a structure must be a YAML mapping")
+    check_finite(raw, str(p))
     base = p.resolve().parent
     for key in ("part_a", "part_b"):
         if isinstance(raw.get(key), str):
             raw[key] = load_part_spec(resolve_relative(raw[key], base)).model_dump()
+        elif isinstance(raw.get(key), dict) and isinstance(raw[key].get("mesh"), str):
+            raw[key] = {**raw[key], "mesh": str(resolve_relative(raw[key]["mesh"], base))}
     return _validate(AssemblyTask, raw, p)
 
 
