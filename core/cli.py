@@ -10,11 +10,13 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import traceback
 from collections.abc import Sequence
 from importlib import metadata
 from pathlib import Path
 
 from asmteach.core.errors import UserError
+from asmteach.core.io import describe_os_error
 
 __all__ = ["build_parser", "main"]
 
@@ -50,36 +52,53 @@ def _cmd_plugins(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from asmteach.core.config import load_run_config
+    from asmteach.core.run_setup import load_run
 
-    cfg = load_run_config(args.config)
-    print(f"{args.config}: ok (seed {cfg.seed}; structure {cfg.structure})")
+    # The same loader as `run`: what validates here starts there (structure, meshes, markers, camera, demo,
+    # execution, table, every plugin's settings).
+    setup = load_run(args.config, overrides=_overrides(args.set))
+    print(f"{args.config}: ok (seed {setup.cfg.seed}; {setup.summary()})")
     return 0
 
 
 def _cmd_library(args: argparse.Namespace) -> int:
+    from asmteach.core.io import check_out_file
     from asmteach.core.library import render_library
 
-    out = render_library(Path(args.folder), Path(args.out))
+    out = render_library(Path(args.folder), check_out_file(args.out))
     print(f"part library contact sheet: {out}")
     return 0
 
 
-def _cmd_run(args: argparse.Namespace) -> int:
+def _overrides(items: Sequence[str] | None) -> dict[str, object] | None:
+    """``--set KEY=VALUE`` items as ``{dotted key: value}``, each value read as YAML (``3``, ``[1, 2]``, ``x``)."""
     import yaml
 
-    from asmteach.core.config import load_run_config
-    from asmteach.core.pipeline import run_pipeline
-
-    overrides = {}
-    for item in args.set or []:
+    overrides: dict[str, object] = {}
+    for item in items or []:
         key, sep, value = item.partition("=")
-        if not sep or not key:
+        if not sep or not key.strip():
             raise UserError(f"--set {item!r}: write KEY=VALUE, e.g. --set seed=3")
-        overrides[key.strip()] = yaml.safe_load(value)
-    cfg = load_run_config(args.config, overrides=overrides or None)
+        try:
+            overrides[key.strip()] = yaml.safe_load(value)
+        except yaml.YAMLError as exc:
+            problem = getattr(exc, "problem", None) or "not a YAML value"
+            raise UserError(f"--set {key.strip()}: the value is not valid YAML ({problem}); quote a text, "
+                            "e.g. --set name='a: b'") from None
+    return overrides or None
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from asmteach.core.io import run_folder
+    from asmteach.core.pipeline import run_pipeline
+    from asmteach.core.run_setup import load_run
+
+    setup = load_run(args.config, overrides=_overrides(args.set))  # bad input ends here, before any work
+    cfg = setup.cfg
     out = Path(args.out)
-    report = run_pipeline(cfg, out, pm=args.plugin_manager)
+    # The run writes into a staging folder; the results replace out's only once it has ended (nothing mixed).
+    with run_folder(out, cfg.name, force=args.force) as stage:
+        report = run_pipeline(cfg, stage, pm=args.plugin_manager)
     try:
         from asmteach.core.report_html import format_summary
 
@@ -108,8 +127,9 @@ def build_parser(pm=None) -> argparse.ArgumentParser:
     p.add_argument("--role", default=None, help="only this role (e.g. detectors)")
     p.set_defaults(func=_cmd_plugins)
 
-    p = sub.add_parser("validate", help="check a run config; errors name the key path")
+    p = sub.add_parser("validate", help="check a run config: builds everything `run` builds, before any work")
     p.add_argument("config")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key (dotted path)")
     p.set_defaults(func=_cmd_validate)
 
     p = sub.add_parser("library", help="render every part of a part-library folder to a PNG contact sheet")
@@ -121,6 +141,7 @@ def build_parser(pm=None) -> argparse.ArgumentParser:
     p.add_argument("config", help="run config YAML")
     p.add_argument("--out", required=True, help="output folder (report.json, report.html, figures, animation)")
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key (dotted path)")
+    p.add_argument("--force", action="store_true", help="replace another run's results in --out")
     p.set_defaults(func=_cmd_run, plugin_manager=pm)
 
     from asmteach.core.check_part import add_check_part_command
@@ -139,10 +160,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     from asmteach.core.hooks import make_plugin_manager
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    verbose = "-v" in (argv if argv is not None else sys.argv[1:]) or "--verbose" in (
+        argv if argv is not None else sys.argv[1:])
     try:
         pm = make_plugin_manager()
         parser = build_parser(pm)
         args = parser.parse_args(argv)
+        verbose = bool(args.verbose)
         if args.verbose:
             logging.getLogger().setLevel(logging.DEBUG)
         if getattr(args, "func", None) is None:
@@ -155,6 +179,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("asmteach: interrupted; results written so far are intact", file=sys.stderr)
         return 130
+    except OSError as exc:
+        # The file system failed mid-way (a full disk, a folder made read-only): the task failed, the input
+        # was fine; every result file is written atomically, so those written before are intact.
+        print(f"asmteach: error: {describe_os_error(exc)}", file=sys.stderr)
+        if verbose:
+            traceback.print_exc()
+        return 1
+    except Exception as exc:  # noqa: BLE001 - one line for the user; the traceback with -v
+        if verbose:
+            traceback.print_exc()
+        text = " ".join(str(exc).split())
+        text = text if len(text) <= 200 else text[:200] + "..."
+        print(f"asmteach: internal error ({type(exc).__name__}: {text}); this is a bug, please report it with "
+              "the output of the same command with -v", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ import contextlib
 import errno
 import json
 import os
+import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -30,6 +31,7 @@ __all__ = [
     "describe_os_error",
     "read_jsonl",
     "read_yaml",
+    "run_folder",
     "to_jsonable",
     "write_bytes",
     "write_json",
@@ -103,6 +105,78 @@ def check_out_file(path: str | os.PathLike[str], *, flag: str = "--out") -> Path
         raise UserError(f"{flag} {p}: the file is read-only; give another file")
     check_out_dir(p.parent if str(p.parent) else Path("."), flag=f"{flag} {p}: folder")
     return p
+
+
+RUN_MARKER = "report.json"
+"""The file whose presence (and ``config.name``) says whose results a run folder holds."""
+
+
+def _owner(folder: Path, marker: str, key: tuple[str, ...]) -> str | None:
+    """The name of the run whose results ``folder`` holds (``marker``'s JSON at ``key``); ``""`` if unknown;
+    None if it holds nothing."""
+    entries = [e for e in folder.iterdir() if not e.name.startswith(".")]
+    if not entries:
+        return None
+    try:
+        node: Any = json.loads((folder / marker).read_text(encoding="utf-8"))
+        for k in key:
+            node = node[k]
+        return str(node)
+    except (OSError, ValueError, KeyError, TypeError):
+        return ""  # files, but no readable marker: someone else's, or a torn run of an old version
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+@contextlib.contextmanager
+def run_folder(out: str | os.PathLike[str], name: str, *, force: bool = False, marker: str = RUN_MARKER,
+               key: tuple[str, ...] = ("config", "name")) -> Iterator[Path]:
+    """A fresh folder to write a run named ``name`` into; its files replace ``out``'s when the block ends.
+
+    Nothing lost, nothing mixed: the run writes into a hidden staging folder
+    inside ``out``; only when the block ends normally are ``out``'s old
+    results moved aside and the new ones moved in (renames in one folder),
+    then the old ones deleted. An interrupted or crashed run leaves ``out``
+    as it was (its staging folder is removed, or, after a kill -9, removed by
+    the next run). ``out`` holding another run's results (a ``marker`` file
+    naming another run at ``key``, or files without a marker) is refused
+    unless ``force``; the results of the same run are replaced.
+    """
+    target = check_out_dir(out)
+    for stale in target.glob(".partial-*"):  # left by a run killed with -9
+        with contextlib.suppress(ValueError):
+            if not _pid_alive(int(stale.name.rsplit("-", 1)[1])):
+                shutil.rmtree(stale, ignore_errors=True)
+    owner = _owner(target, marker, key)
+    if owner is not None and owner != name and not force:
+        whose = f"the results of run {owner!r}" if owner else "files that are not a run's results"
+        raise UserError(f"--out {target}: holds {whose}; give an empty or new folder, or add --force to replace "
+                        "them")
+    stage = target / f".partial-{os.getpid()}"
+    shutil.rmtree(stage, ignore_errors=True)
+    stage.mkdir()
+    try:
+        yield stage
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    old = target / f".replaced-{os.getpid()}"
+    old.mkdir(exist_ok=True)
+    for entry in target.iterdir():
+        if not entry.name.startswith("."):
+            entry.rename(old / entry.name)
+    for entry in stage.iterdir():
+        entry.rename(target / entry.name)
+    stage.rmdir()
+    shutil.rmtree(old, ignore_errors=True)
 
 
 @contextlib.contextmanager
@@ -197,9 +271,11 @@ def read_jsonl(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
         if not line:
             continue
         try:
-            out.append(json.loads(line))
+            record = json.loads(line)
         except json.JSONDecodeError:
             continue
+        if isinstance(record, dict):  # a torn line can still parse (a bare number): skip it too
+            out.append(record)
     return out
 
 

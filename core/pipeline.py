@@ -28,7 +28,6 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import AssemblyProblem, PartModel, Robot
 from asmteach.core.io import to_jsonable, write_json, write_model
 from asmteach.core.models import AssemblyTask, Detection, Plan, RunReport, StageOutcome, StrictModel, TablePlane
-from asmteach.core.parts import build_part, load_structure
 from asmteach.core.scene import SceneSettings, random_start_poses
 from asmteach.core.symmetry import part_symmetries
 
@@ -175,7 +174,7 @@ class _Run:
         t0 = time.perf_counter()
         try:
             yield details
-        except (StageFailed, UserError) as exc:
+        except (StageFailed, UserError, NotImplementedError) as exc:  # a plugin without an optional method too
             seconds = time.perf_counter() - t0
             reason = exc.reason if isinstance(exc, StageFailed) else str(exc)
             if isinstance(exc, StageFailed):
@@ -198,12 +197,15 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, *, pm: Any | None = None) -> Run
     Raises :class:`UserError` only for bad input found before anything runs
     (config, structure file); every later failure is recorded in the report.
     """
+    from asmteach.core.run_setup import prepare_run
+
+    setup = prepare_run(cfg)  # every object of the run built and checked before anything is written
+    cfg = setup.cfg  # the robot's settings now carry the config's table
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     run = _Run(cfg, out, pm)
-    structure = cfg.path(cfg.structure)
-    true_task = load_structure(structure)
-    part_a, part_b = build_part(true_task.part_a), build_part(true_task.part_b)
+    true_task = setup.task
+    part_a, part_b = setup.part_a, setup.part_b
     robot: Robot | None = None
     try:
         learned = _teach(run, true_task)

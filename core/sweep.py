@@ -52,7 +52,16 @@ from pydantic import Field, ValidationError
 
 from asmteach.core.config import format_validation_error, set_dotted
 from asmteach.core.errors import UserError
-from asmteach.core.io import append_jsonl, atomic_path, read_jsonl, read_yaml, to_jsonable, write_json, write_text
+from asmteach.core.io import (
+    append_jsonl,
+    atomic_path,
+    check_out_dir,
+    read_jsonl,
+    read_yaml,
+    to_jsonable,
+    write_json,
+    write_text,
+)
 from asmteach.core.models import StrictModel, resolve_relative
 from asmteach.core.registry import closest
 
@@ -109,6 +118,11 @@ class Experiment(abc.ABC):
         """Write kind-specific tables and figures from all rows; return their paths."""
         return []
 
+    def check(self, params: Any) -> None:
+        """Check one grid point's params beyond their model (files named in them, plugin names) before any
+        trial runs; raise :class:`UserError` naming the key. The default checks nothing more."""
+        return None
+
 
 class ExperimentFile(StrictModel):
     """The YAML schema of an experiment file."""
@@ -161,8 +175,16 @@ def load_experiment(path: str | Path) -> tuple[ExperimentFile, type[Experiment]]
     except ValidationError as exc:
         raise UserError(f"{p}: {format_validation_error(exc)}") from None
     kind = load_kind(exp.experiment)
+    checker = kind(p.resolve().parent)
     for point in grid_points(exp):
-        params_for(kind, exp, point, where=str(p))
+        # Every grid point is validated before the first trial runs: a typo in the tenth value of a grid
+        # costs one line now, not a sweep of failed trials.
+        params = params_for(kind, exp, point, where=str(p))
+        try:
+            checker.check(params)
+        except UserError as exc:
+            at = ", ".join(f"{k}={v!r}" for k, v in point.items())
+            raise UserError(f"{p}: {exc}" + (f" (grid point {at})" if at else "")) from None
     return exp, kind
 
 
@@ -186,19 +208,50 @@ def params_for(kind: type[Experiment], exp: ExperimentFile, point: dict[str, Any
         raise UserError(f"{prefix}{format_validation_error(exc, 'params')}") from None
 
 
-def trial_id(point: dict[str, Any], seed: int) -> str:
-    """Stable id of a trial, independent of grid order."""
-    blob = json.dumps({"point": point, "seed": seed}, sort_keys=True, default=str)
+def params_hash(kind_name: str, params: Any) -> str:
+    """Hash of a trial's resolved params (every value, defaults included) and its experiment kind."""
+    resolved = params.model_dump(mode="json") if hasattr(params, "model_dump") else params
+    blob = json.dumps({"kind": kind_name, "params": resolved}, sort_keys=True, default=str)
     return hashlib.sha1(blob.encode()).hexdigest()[:12]
 
 
-def plan_trials(exp: ExperimentFile) -> list[TrialSpec]:
-    """Every (grid point, seed) pair of the experiment."""
-    return [
-        TrialSpec(trial_id=trial_id(point, seed), point=point, seed=seed)
-        for point in grid_points(exp)
-        for seed in exp.seed_list()
-    ]
+def trial_id(point: dict[str, Any], seed: int, resolved: str = "") -> str:
+    """Stable id of a trial, independent of grid order.
+
+    ``resolved`` is :func:`params_hash` of the trial's params: editing the
+    experiment's base params (or a default of the kind) gives new ids, so a
+    resumed sweep runs the trials again instead of keeping results of the
+    old params under the new ones.
+    """
+    key: dict[str, Any] = {"point": point, "seed": seed}
+    if resolved:
+        key["params"] = resolved
+    blob = json.dumps(key, sort_keys=True, default=str)
+    return hashlib.sha1(blob.encode()).hexdigest()[:12]
+
+
+def plan_trials(exp: ExperimentFile, kind: type[Experiment] | None = None) -> list[TrialSpec]:
+    """Every (grid point, seed) pair of the experiment; ids include the resolved params' hash when ``kind``
+    is given (as :func:`run_sweep` does)."""
+    out = []
+    for point in grid_points(exp):
+        resolved = params_hash(exp.experiment, params_for(kind, exp, point)) if kind is not None else ""
+        out += [TrialSpec(trial_id=trial_id(point, seed, resolved), point=point, seed=seed) for seed in exp.seed_list()]
+    return out
+
+
+def current_rows(rows: list[dict[str, Any]], trials: list[TrialSpec]) -> list[dict[str, Any]]:
+    """The log's rows of the planned trials, the last row of each (a retried trial's newest), in log order.
+
+    Rows of other params (an edited experiment file) stay in the log but are
+    not results of this sweep.
+    """
+    planned = {t.trial_id for t in trials}
+    last: dict[str, int] = {}
+    for i, r in enumerate(rows):
+        if r.get("trial_id") in planned:
+            last[r["trial_id"]] = i
+    return [rows[i] for i in sorted(last.values())]
 
 
 def _run_one(kind_name: str, base_dir: str, exp_json: str, trial_json: str, out_dir: str) -> dict[str, Any]:
@@ -230,14 +283,26 @@ def run_sweep(
     executor: str = "local",
     limit: int | None = None,
     progress: bool = True,
+    retry_failed: bool = False,
 ) -> list[dict[str, Any]]:
-    """Run (or resume) an experiment; returns every row, old and new."""
+    """Run (or resume) an experiment; returns the row of every planned trial run so far, old and new.
+
+    ``retry_failed``: trials whose last row failed run again (a new row is
+    appended; the newest row of a trial is its result).
+    """
     exp, kind = load_experiment(path)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = check_out_dir(out_dir)
+    if workers is not None and not 1 <= workers <= 64:
+        raise UserError(f"--workers {workers}: give 1 to 64 processes")
+    if limit is not None and limit < 0:
+        raise UserError(f"--limit {limit}: give a number of trials >= 0")
     log_path = out / "trials.jsonl"
-    done = {r["trial_id"] for r in read_jsonl(log_path)}
-    todo = [t for t in plan_trials(exp) if t.trial_id not in done]
+    if log_path.exists() and not log_path.is_file():
+        raise UserError(f"{log_path}: is not a file; give another --out")
+    trials = plan_trials(exp, kind)
+    previous = current_rows(read_jsonl(log_path), trials)
+    done = {r["trial_id"] for r in previous if r.get("ok") or not retry_failed}
+    todo = [t for t in trials if t.trial_id not in done]
     if limit is not None:
         todo = todo[:limit]
     write_json(out / "experiment.json", {"file": str(Path(path).resolve()), **exp.model_dump(mode="json")})
@@ -255,7 +320,7 @@ def run_sweep(
                 _run_pool(args, log_path, bar, interrupt, n_workers)
         finally:
             bar.close()
-    rows = read_jsonl(log_path)
+    rows = current_rows(read_jsonl(log_path), trials)
     summarize(rows, out, kind(Path(base_dir)), title=exp.experiment)
     return rows
 
@@ -314,9 +379,36 @@ def _run_serial(args: list[tuple[Any, ...]], log_path: Path, bar: _Bar, interrup
         raise KeyboardInterrupt
 
 
-def _ignore_sigint() -> None:
-    """Pool-worker initializer: Ctrl-C reaches the whole process group, but only the parent decides."""
+def _die_with_parent(parent: int) -> None:
+    """Have the kernel kill this process when its parent dies (Linux ``PR_SET_PDEATHSIG``); elsewhere, a
+    thread that watches the parent. A sweep killed with -9 then leaves no workers running on."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        PR_SET_PDEATHSIG = 1
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        except (OSError, AttributeError):  # no prctl: the watching thread below does it
+            pass
+        else:
+            if os.getppid() != parent:  # the parent died before the request was made
+                os._exit(1)
+            return
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="asmteach-parent-watch").start()
+
+
+def _ignore_sigint(parent: int | None = None) -> None:
+    """Pool-worker initializer: Ctrl-C reaches the whole process group, but only the parent decides; the
+    worker dies with the parent (:func:`_die_with_parent`)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if parent is not None:
+        _die_with_parent(parent)
 
 
 def _terminate_workers(pool: ProcessPoolExecutor) -> None:
@@ -332,7 +424,7 @@ def _terminate_workers(pool: ProcessPoolExecutor) -> None:
 def _run_pool(
     args: list[tuple[Any, ...]], log_path: Path, bar: _Bar, interrupt: _GracefulInterrupt, n_workers: int
 ) -> None:
-    pool = ProcessPoolExecutor(max_workers=n_workers, initializer=_ignore_sigint)
+    pool = ProcessPoolExecutor(max_workers=n_workers, initializer=_ignore_sigint, initargs=(os.getpid(),))
     pending: set[Future[dict[str, Any]]] = set()
     queue = list(args)
     try:
@@ -689,12 +781,20 @@ def summary_plot(
 
 # ---------------------------------------------------------------- CLI
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    rows = run_sweep(args.experiment, args.out, workers=args.workers, executor=args.executor, limit=args.limit)
+    rows = run_sweep(args.experiment, args.out, workers=args.workers, executor=args.executor, limit=args.limit,
+                     retry_failed=args.retry_failed)
     n_ok = sum(bool(r.get("ok")) for r in rows)
     print(f"{len(rows)} trials ({n_ok} ok); summary: {Path(args.out) / 'summary.md'}")
     summary = Path(args.out) / "summary.md"
     if summary.exists() and len(summary.read_text()) < 6000:
         sys.stdout.write(summary.read_text())
+    if n_ok < len(rows):
+        # Exit 1: some trials raised (their errors are in summary.md); a re-run with --retry-failed redoes them.
+        errors = {r.get("error") for r in rows if not r.get("ok")}
+        first = " ".join(str(sorted(errors, key=str)[0]).split())[:160]
+        print(f"asmteach: {len(rows) - n_ok} of {len(rows)} trials failed ({len(errors)} distinct error(s), e.g. "
+              f"{first}); re-run with --retry-failed to run them again", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -706,4 +806,5 @@ def add_sweep_command(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=None, help="local processes (default: the file's workers)")
     p.add_argument("--executor", choices=["local", "ray"], default="local", help="ray needs asmteach[ray]")
     p.add_argument("--limit", type=int, default=None, help="run at most this many new trials")
+    p.add_argument("--retry-failed", action="store_true", help="run the trials that failed again")
     p.set_defaults(func=_cmd_sweep)

@@ -13,21 +13,49 @@ from asmteach.core import geometry
 from asmteach.core.config import RunConfig, format_validation_error, load_run_config, validate_settings
 from asmteach.core.errors import UserError
 from asmteach.core.hooks import hookimpl
-from asmteach.core.io import atomic_path, write_json, write_model
-from asmteach.core.models import CameraIntrinsics
+from asmteach.core.io import atomic_path, check_out_file, run_folder, write_json, write_model
+from asmteach.core.models import AssemblyTask, CameraIntrinsics
 from asmteach.core.parts import build_part, load_structure
 
-__all__ = ["asmteach_add_commands", "demo_settings", "resolve_camera", "write_demo"]
+__all__ = ["asmteach_add_commands", "check_demonstration", "demo_settings", "resolve_camera", "write_demo"]
 
 
 def demo_settings(cfg: RunConfig):
     """The config's ``demo`` section validated by :class:`~.scene.DemoSettings` (errors name ``demo.<key>``)."""
+    return _demo_model(cfg.demo)
+
+
+def _demo_model(demo: dict):
     from asmteach.plugins.detectors.aruco.scene import DemoSettings
 
     try:
-        return DemoSettings.model_validate(cfg.demo)
+        return DemoSettings.model_validate(demo)
     except ValidationError as exc:
         raise UserError(format_validation_error(exc, "demo")) from None
+
+
+def check_demonstration(task: AssemblyTask, demo: dict, camera_file: Path | None):
+    """Everything a rendered demonstration of ``task`` needs, checked before any rendering.
+
+    The ``demo`` section (:class:`~.scene.DemoSettings`), the camera (the
+    file's intrinsics, or the C615-like default; the renderer draws an ideal
+    pinhole camera, so no distortion), and the markers (each part needs one,
+    dictionaries known, ids within them and not shared). Returns the demo
+    settings; :class:`UserError` in one line otherwise.
+    """
+    from asmteach.plugins.detectors.aruco.camera import c615_like, load_camera
+    from asmteach.plugins.detectors.aruco.markers import marker_bits, marker_table
+
+    settings = _demo_model(demo)
+    camera = load_camera(camera_file) if camera_file is not None else c615_like()
+    if any(abs(d) > 0 for d in camera.dist):
+        raise UserError(f"camera {camera_file}: the demonstration renderer draws an ideal pinhole camera; give "
+                        "intrinsics without distortion (distortion_coefficients all 0)")
+    marker_table(task.part_a, task.part_b)  # a part without markers, a shared id, an unknown dictionary
+    for part in (task.part_a, task.part_b):
+        for m in part.markers:
+            marker_bits(m)  # the id exists in its dictionary
+    return settings
 
 
 def resolve_camera(explicit: str | None, cfg: RunConfig | None, frames: Path | None) -> tuple[CameraIntrinsics, str]:
@@ -60,6 +88,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     from asmteach.core import registry
     from asmteach.plugins.detectors.aruco.frames import load_frames
 
+    check_out_file(args.out)  # before any work
     cfg = _load_cfg(args.config)
     task = load_structure(cfg.path(cfg.structure))
     cls = registry.get_class("teachers", cfg.teacher.plugin)
@@ -87,8 +116,8 @@ def write_demo(cfg: RunConfig, out: Path, *, camera: CameraIntrinsics | None = N
     from asmteach.plugins.detectors.aruco.camera import save_camera
     from asmteach.plugins.detectors.aruco.scene import render_demo_frames
 
-    settings = demo_settings(cfg)
     task = load_structure(cfg.path(cfg.structure))
+    settings = check_demonstration(task, cfg.demo, cfg.path(cfg.camera) if cfg.camera and camera is None else None)
     if camera is None:
         camera, _ = resolve_camera(None, cfg, None)
     if any(abs(d) > 0 for d in camera.dist):
@@ -118,7 +147,12 @@ def write_demo(cfg: RunConfig, out: Path, *, camera: CameraIntrinsics | None = N
 
 def _cmd_render_demo(args: argparse.Namespace) -> int:
     cfg = _load_cfg(args.config)
-    truth = write_demo(cfg, Path(args.out))
+    task = load_structure(cfg.path(cfg.structure))
+    check_demonstration(task, cfg.demo, cfg.path(cfg.camera) if cfg.camera else None)  # before any work
+    # Frames of an earlier demonstration never mix with these: the folder is replaced whole at the end
+    # (another structure's demonstration is kept unless --force).
+    with run_folder(args.out, task.name, force=args.force, marker="ground_truth.json", key=("structure",)) as stage:
+        truth = write_demo(cfg, stage)
     n_app = sum(r["phase"] == "approach" for r in truth["frames"])
     print(f"rendered {len(truth['frames'])} frame(s) of {truth['structure']} ({n_app} approach) into {args.out}")
     return 0
@@ -135,6 +169,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     from asmteach.plugins.detectors.aruco.camera import save_camera
     from asmteach.plugins.detectors.aruco.frames import load_named_frames
 
+    check_out_file(args.out)
+    if args.coverage:
+        check_out_file(args.coverage, flag="--coverage")
     board = args.board.lower()
     try:
         if board == "chessboard":
@@ -192,6 +229,7 @@ def asmteach_add_commands(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("render-demo", help="render a synthetic demonstration with exact ground truth")
     p.add_argument("config", help="run config (structure, camera, demo section)")
     p.add_argument("--out", required=True, help="output folder for frames, camera.yaml, ground_truth.json")
+    p.add_argument("--force", action="store_true", help="replace another structure's demonstration in --out")
     p.set_defaults(func=_cmd_render_demo)
 
     p = subparsers.add_parser("calibrate", help="camera intrinsics from ChArUco or chessboard photos")

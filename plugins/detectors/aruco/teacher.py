@@ -111,6 +111,13 @@ class ArucoTeacher(Teacher):
 
         return demonstrate(task, demo, camera_file, out_dir, self.seed)
 
+    @classmethod
+    def check_demonstration(cls, task: AssemblyTask, demo: dict, camera_file: Path | None = None):
+        """What :meth:`demonstrate` needs (demo section, camera, markers), checked without rendering."""
+        from asmteach.plugins.detectors.aruco.commands import check_demonstration
+
+        return check_demonstration(task, demo, camera_file)
+
     # ------------------------------------------------------------ per frame
     def observe(self, frames: Sequence[np.ndarray], camera: CameraIntrinsics, task: AssemblyTask) -> list[FrameResult]:
         """Detect markers and solve each part's pose in every frame."""

@@ -20,7 +20,7 @@ from asmteach.core.config import format_validation_error
 from asmteach.core.errors import UserError
 from asmteach.core.hooks import hookimpl
 from asmteach.core.interfaces import PartModel
-from asmteach.core.io import read_yaml, write_json
+from asmteach.core.io import check_out_file, read_yaml, write_json
 from asmteach.core.models import HandSpec
 from asmteach.core.parts import MESH_SUFFIXES
 from asmteach.core.parts import load_parts as load_library_parts
@@ -86,6 +86,9 @@ def run_grasps(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".json":
         raise UserError(f"--out {args.out}: give a .json file name")
+    check_out_file(out)  # a read-only or wrong --out costs one line, before any work
+    if args.seed < 0:
+        raise UserError(f"--seed {args.seed}: give a whole number >= 0")
     hand = load_hand(args.hand)
     overrides: dict[str, Any] = {"mu": args.mu, "cache": not args.no_cache}
     if args.pad_min_support is not None:

@@ -11,14 +11,16 @@ PNG is written next to it.
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from asmteach.core.errors import UserError
 from asmteach.core.hooks import hookimpl
 from asmteach.core.interfaces import PartModel
-from asmteach.core.io import write_json
+from asmteach.core.io import check_out_file, write_json
 from asmteach.core.parts import load_parts as load_library_parts
 from asmteach.plugins.planners.placements.contact_sheet import render_contact_sheet
 from asmteach.plugins.planners.placements.planner import PlacementResult, placement_result
@@ -45,8 +47,12 @@ def _part_record(part: PartModel, result: PlacementResult) -> dict[str, Any]:
 
 
 def _cmd_placements(args: argparse.Namespace) -> int:
+    out = check_out_file(args.out)  # a read-only or wrong --out costs one line, before any work
+    if not (math.isfinite(args.min_margin) and args.min_margin >= 0):
+        raise UserError(f"--min-margin {args.min_margin}: give a number >= 0 (d/h, e.g. 0.1)")
+    if not (math.isfinite(args.angle_tol_deg) and 0 < args.angle_tol_deg <= 45):
+        raise UserError(f"--angle-tol-deg {args.angle_tol_deg}: give degrees in (0, 45], e.g. 1")
     parts = load_parts(args.mesh, units=args.units, com=args.com)
-    out = Path(args.out)
     records = []
     for part in parts:
         result = placement_result(part, min_margin=args.min_margin, angle_tol_deg=args.angle_tol_deg)
