@@ -5,7 +5,11 @@ grasp, plan, execute, measure) with the trial's seed, which draws the start
 placements, noise and every plugin's random choices. Recorded: success, the
 stage that failed and why, the achieved error of B in A against the taught
 pose (mm, deg, modulo the parts' symmetries), A's distance to its goal (mm),
-and seconds per stage. Each trial's run directory (report.json/html, plan,
+and both clocks: the computer's seconds per stage (``<stage>_seconds``) and the
+robot's seconds of simulated motion (``robot_seconds``, ``robot_<kind>_seconds``
+for transit, approach, insertion, regrasp; ``plan_robot_seconds`` and
+``plan_robot_seconds_trapezoid``, the plan's with its timing and with the old
+trapezoid on the same paths). Each trial's run directory (report.json/html, plan,
 figures) is kept under the sweep's trial work directory.
 """
 
@@ -34,7 +38,7 @@ class EndToEnd(Experiment):
 
     Params = EndToEndParams
     plot_metrics = ("success", "achieved_vs_taught_mm", "achieved_vs_taught_deg", "a_goal_error_mm",
-                    "plan_seconds", "execute_seconds")
+                    "plan_seconds", "robot_seconds")  # six at most: the computer's planning clock, the robot's clock
 
     def run_trial(self, params: EndToEndParams, seed: int, workdir: Path) -> dict[str, Any]:
         from asmteach.core.pipeline import run_pipeline
@@ -48,4 +52,13 @@ class EndToEnd(Experiment):
                 row[key] = report.metrics[key]
         for stage in report.stages:
             row[f"{stage.stage}_seconds"] = stage.seconds
+        # the robot's clock beside the computer's: simulated motion seconds executed, by kind, and the plan's
+        # own with the timing used and with the trapezoid on the same paths (issue 27)
+        for kind, seconds in report.robot_seconds.items():
+            row["robot_seconds" if kind == "total" else f"robot_{kind}_seconds"] = seconds
+        for key, name in (("robot_seconds", "plan_robot_seconds"),
+                          ("robot_seconds_trapezoid", "plan_robot_seconds_trapezoid")):
+            planned = report.plan_stats.get(key)
+            if isinstance(planned, dict) and "total" in planned:
+                row[name] = planned["total"]
         return row

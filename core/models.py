@@ -421,6 +421,9 @@ class PlanSegment(StrictModel):
     trajectory: Trajectory | None = None
     gripper: GripperEvent | None = None
     part: str | None = Field(None, description="the part this step moves or serves (None: not said)")
+    kind: str | None = Field(
+        None, description="transit, approach, insertion or regrasp for a motion, gripper for a gripper event (the "
+        "split of the robot seconds; None: not said)")
 
 
 class Plan(StrictModel):
@@ -454,6 +457,12 @@ class RunReport(StrictModel):
     detections: list[Detection] = Field(default_factory=list)
     plan_stats: dict[str, Any] = Field(default_factory=dict)
     metrics: dict[str, float] = Field(default_factory=dict)
+    robot_seconds: dict[str, float] = Field(
+        default_factory=dict,
+        description="the robot's clock: seconds of simulated motion executed, total and per kind (transit, "
+        "approach, insertion, regrasp); empty when nothing was executed (the plan's own are in plan_stats)")
+    computer_seconds: dict[str, float] = Field(
+        default_factory=dict, description="the computer's clock: wall seconds per stage, and their total")
     artefacts: dict[str, str] = Field(default_factory=dict)
 
 

@@ -473,6 +473,7 @@ def _execute(run: _Run, robot: Robot, plan: Plan, stage: str = "execute") -> lis
                     if record:
                         frames.append(robot.sense_rgb())
                 trace.after_path(seg.trajectory, seg.label)
+                _count_robot_seconds(run.report, seg)
             elif seg.gripper is not None:
                 ev = seg.gripper
                 close = ev.action == "close"
@@ -486,6 +487,15 @@ def _execute(run: _Run, robot: Robot, plan: Plan, stage: str = "execute") -> lis
         d["frames_recorded"] = len(frames)
         d["max_tracking_error_rad"] = trace.max_tracking_error
     return frames
+
+
+def _count_robot_seconds(report: RunReport, seg: Any) -> None:
+    """Add an executed motion's duration (simulated seconds) to the report's robot clock, in total and by kind."""
+    seconds = float(seg.trajectory.times[-1] - seg.trajectory.times[0])
+    clock = report.robot_seconds
+    clock["total"] = round(clock.get("total", 0.0) + seconds, 3)
+    kind = seg.kind or "unlabelled"
+    clock[kind] = round(clock.get(kind, 0.0) + seconds, 3)
 
 
 class _ExecutionTrace:
@@ -629,6 +639,12 @@ def _write_animation(run: _Run, frames: list[np.ndarray]) -> None:
 def _finish(run: _Run) -> None:
     from asmteach.core.run_figures import metrics_figure
 
+    # the computer's clock beside the robot's: wall seconds per stage (a stage run twice is summed)
+    clock: dict[str, float] = {}
+    for st in run.report.stages:
+        clock[st.stage] = round(clock.get(st.stage, 0.0) + st.seconds, 3)
+    clock["total"] = round(sum(st.seconds for st in run.report.stages), 3)
+    run.report.computer_seconds = clock
     if run.report.metrics:
         path = metrics_figure(run.out / "errors.png", run.report)
         run.artefact("errors", path, "png")

@@ -73,6 +73,7 @@ figure { margin: 1em 0 1.6em; }
 figure img { max-width: 100%; height: auto; border: 1px solid var(--line); }
 figcaption { color: var(--muted); font-size: .9em; margin-top: .3em; }
 footer { color: var(--muted); font-size: .85em; margin-top: 3em; }
+.clocks { display: flex; flex-wrap: wrap; gap: 2em; align-items: flex-start; }
 @media print {
   body { margin: 0; max-width: none; font-size: 11pt; }
   .status { color: #000; border: 2px solid #000; background: none !important; }
@@ -197,7 +198,10 @@ def _header(report: RunReport) -> str:
         status = f'<span class="status bad">FAILED at {_e(stage)}</span>'
         reason = f'<p class="reason"><b>Reason:</b> {_e(report.reason or "not recorded")}</p>'
     total = sum(s.seconds for s in report.stages)
-    meta = f"seed {report.seed} · {len(report.stages)} stages · {total:.2f} s"
+    meta = f"seed {report.seed} · {len(report.stages)} stages · computer {total:.2f} s"
+    robot = _robot_clock(report)
+    if robot.get("total") is not None:
+        meta += f" · robot {robot['total']:.2f} s of motion"
     return f"<header><h1>{_e(name)}</h1><p class=\"meta\">{_e(meta)}</p>{status}{reason}</header>"
 
 
@@ -213,6 +217,35 @@ def _stages_section(report: RunReport) -> str:
         for s in report.stages
     ]
     return "<h2>Stages</h2>" + _table(["stage", "ok", "seconds", "reason", "details"], rows)
+
+
+_ROBOT_KINDS = ("transit", "approach", "insertion", "regrasp")
+
+
+def _robot_clock(report: RunReport) -> dict[str, float]:
+    """The robot seconds to show: those executed, else the plan's (seconds of simulated motion)."""
+    if report.robot_seconds:
+        return dict(report.robot_seconds)
+    planned = report.plan_stats.get("robot_seconds")
+    return dict(planned) if isinstance(planned, dict) else {}
+
+
+def _clocks_section(report: RunReport) -> str:
+    """Both clocks side by side: the robot's (simulated motion, by kind) and the computer's (per stage)."""
+    executed = report.robot_seconds or {}
+    planned = report.plan_stats.get("robot_seconds") or {}
+    old = report.plan_stats.get("robot_seconds_trapezoid") or {}
+    timing = report.plan_stats.get("timing", "")
+    rows = []
+    for kind in ("total", *_ROBOT_KINDS):
+        if not any(kind in d for d in (executed, planned, old)):
+            continue
+        rows.append([_td(kind)] + [_num(d[kind]) if kind in d else _td("") for d in (executed, planned, old)])
+    robot = _table(["motion", "executed s", f"planned s ({timing or 'timing'})", "trapezoid s (same paths)"], rows)
+    clock = report.computer_seconds or {s.stage: s.seconds for s in report.stages}
+    computer = _table(["stage", "seconds"], [[_td(k), _num(v)] for k, v in clock.items()])
+    return ('<h2>Clocks</h2><div class="clocks"><div><h3>Robot (simulated motion)</h3>' + robot
+            + "</div><div><h3>Computer (wall time)</h3>" + computer + "</div></div>")
 
 
 def _task_section(report: RunReport) -> str:
@@ -313,6 +346,7 @@ def render_report_html(report: RunReport, out_dir: Path) -> str:
     sections = [
         _header(report),
         _stages_section(report),
+        _clocks_section(report),
         _task_section(report),
         _detections_section(report),
         "<h2>Plan</h2>" + _kv_table(report.plan_stats),
@@ -362,6 +396,11 @@ def format_summary(report: RunReport) -> str:
             lines.append(f"  {s.stage:<14} {status:<6} {s.seconds:8.2f} s{tail}")
         if len(report.stages) > len(stages):
             lines.append(f"  ... {len(report.stages) - len(stages)} more stages")
+    robot = _robot_clock(report)
+    if robot.get("total") is not None:
+        split = ", ".join(f"{k} {robot[k]:.1f}" for k in _ROBOT_KINDS if robot.get(k))
+        lines.append(f"clocks: robot {robot['total']:.1f} s of motion, computer "
+                     f"{sum(s.seconds for s in report.stages):.1f} s (robot: {split})")
     if report.task is not None:
         xyz, rpy = _pose_text(report.task.T_A_B)
         lines.append(f"task {report.task.name}: T_A_B [{xyz}] mm  [{rpy}] deg")

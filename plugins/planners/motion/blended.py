@@ -1,0 +1,401 @@
+"""Time-optimal, blended time parametrisation of a joint path with toppra.
+
+The trapezoid of :mod:`.timing` stops the robot at every waypoint. Here a path
+is parametrised once through all its waypoints under per-joint velocity
+(rad/s) and acceleration (rad/s^2) limits by TOPP-RA (``toppra``), and stops
+only where the caller asks (``stops``) and at its two ends.
+
+**Which geometric path.** TOPP-RA needs a path ``q(s)`` with continuous
+tangent; a polyline has corners where the path speed must drop to zero. A
+cubic spline through the waypoints (``toppra.SplineInterpolator``) has no
+corners but wanders away from the straight joint-space segments the motion
+planner checked, by an amount nobody bounds (a third of a segment on a sharp
+turn of a T-RRT path), so it would need a full collision re-check in the scene
+of each motion. We keep the checked polyline instead and round each corner by
+a circular arc in joint space (as Kunz and Stilman's time-optimal trajectory
+generation, MoveIt's TOTG, does): the arc is tangent to both segments, takes
+at most half of each, and its distance from the corner, which is its largest
+distance from the polyline, is at most ``max_deviation`` radians (Euclidean
+joint-space norm). So every configuration of the blended path lies within
+``max_deviation`` of a configuration of the checked path, and nowhere else.
+The default, ``DEFAULT_DEVIATION`` = 0.005 rad, is half the motion planners'
+``collision_resolution`` (0.01 rad): the planners' discrete motion check
+already trusts every configuration that lies within that distance of a
+checked one (it checks the segment only every 0.01 rad), so a blend stays in
+the band of configurations today's check vouches for. Dense paths (the
+straight TCP lines, 4 mm steps) turn little at each waypoint and are rounded
+almost entirely; a sharp T-RRT corner is cut by at most 0.005 rad and passed
+slowly, not at rest.
+
+**Re-check and fall-back.** When the caller has the scene of the motion it
+passes ``is_valid`` (``(m, dof) -> (m,) bool``, True where free, the planner's
+own check). Every arc is then sampled every ``check_step`` radians and checked;
+an arc with an invalid sample is redone with half the deviation, twice, and
+then dropped: the corner is kept sharp and the robot stops there (the
+trapezoid's behaviour, on the checked segments). Lines are the checked
+segments themselves and are not re-checked.
+
+**Limits.** The accelerations of the path jump where a line meets an arc;
+TOPP-RA enforces its constraints at grid points only, and the grid has a point
+at every such junction and is dense along arcs. The result is then sampled
+(``rate_hz``, plus every grid point) and its velocities and accelerations are
+checked against the limits; if any exceeds them, the limits given to TOPP-RA
+are scaled down and it runs again. If TOPP-RA fails on a piece, or is no
+faster there than the trapezoid (a lone straight move: its grid costs a few per
+cent), that piece is timed with the trapezoid on the checked segments, so the
+result is never slower than the old timing. Jerk is not limited (TOPP-RA is second order and the
+robots here give no jerk limits).
+
+**Path speed.** ``path_speed`` caps the joint-space path speed ``|dq/dt|``
+(rad/s, Euclidean): for a straight TCP line with TCP metres per joint-space
+radian ``k``, a TCP speed ``v`` is ``path_speed = v / k``. The insertion uses it
+to keep a set speed along its line.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import toppra
+import toppra.algorithm
+import toppra.constraint
+
+from asmteach.core.errors import UserError
+from asmteach.plugins.planners.motion.timing import TimedPath, time_parametrize
+
+__all__ = ["DEFAULT_DEVIATION", "BlendReport", "BlendedPath", "time_optimal"]
+
+DEFAULT_DEVIATION = 0.005
+"""Largest distance (rad, Euclidean joint-space norm) of a corner blend from the corner it rounds."""
+
+_MIN_TURN = 1e-9  # rad: a smaller turn between segments is no corner
+_MAX_TURN = np.pi - 1e-3  # rad: a reversal cannot be rounded; the robot stops there
+_MIN_RADIUS = 1e-6  # rad: blends tighter than this are no use (the speed through them is ~0)
+
+logging.getLogger("toppra").setLevel(logging.ERROR)  # toppra logs every failure at WARNING; we report them
+
+
+@dataclass
+class _Piece:
+    """A line (``radius == 0``) or circular arc of a blended path, starting at path position ``s0``."""
+
+    s0: float
+    length: float
+    p0: np.ndarray  # line: start point; arc: centre
+    u: np.ndarray  # line: unit direction; arc: unit vector from the centre to the arc's start
+    v: np.ndarray  # arc: unit tangent at the start (unused for a line)
+    radius: float = 0.0
+
+
+class BlendedPath(toppra.interpolator.AbstractGeometricPath):
+    """A joint path of straight segments with circular corner blends, parametrised by arc length (rad).
+
+    ``waypoints`` ``(n, dof)`` radians; ``deviation[i]`` (rad) bounds the
+    blend at interior waypoint ``i`` (0: keep the corner sharp; such a corner
+    must be a stop, see :func:`time_optimal`). Positions are exact on lines
+    and arcs; ``__call__(s, 1)`` is the unit tangent and ``__call__(s, 2)`` the
+    curvature vector (1/rad), 0 on lines.
+    """
+
+    def __init__(self, waypoints: np.ndarray, deviation: np.ndarray) -> None:
+        pts = np.asarray(waypoints, float)
+        self._dof = pts.shape[1]
+        self._waypoints = pts
+        d = np.diff(pts, axis=0)
+        lengths = np.linalg.norm(d, axis=1)
+        units = d / lengths[:, None]
+        cut = np.zeros(len(pts))  # distance from each waypoint to where its blend starts and ends
+        self.arcs: list[tuple[int, float]] = []  # (waypoint index, radius) of every blend
+        arc_at: dict[int, tuple[float, float]] = {}
+        for i in range(1, len(pts) - 1):
+            turn = float(np.arccos(np.clip(units[i - 1] @ units[i], -1.0, 1.0)))
+            if turn < _MIN_TURN or deviation[i] <= 0.0:
+                continue
+            half = 0.5 * turn
+            # the arc's distance from the corner is ell * (1 - cos(half)) / sin(half) = ell * tan(half / 2)
+            ell = min(0.5 * lengths[i - 1], 0.5 * lengths[i], deviation[i] / np.tan(0.5 * half))
+            radius = ell / np.tan(half)
+            cut[i] = ell
+            arc_at[i] = (radius, turn)
+            self.arcs.append((i, radius))
+        pieces: list[_Piece] = []
+        s = 0.0
+        for i in range(len(pts) - 1):
+            start = pts[i] + cut[i] * units[i]
+            length = lengths[i] - cut[i] - cut[i + 1]
+            if length > 1e-12:
+                pieces.append(_Piece(s, length, start, units[i], units[i]))
+                s += length
+            if i + 1 in arc_at:
+                radius, turn = arc_at[i + 1]
+                a, b = units[i], units[i + 1]
+                bis = b - a
+                centre = pts[i + 1] + bis / np.linalg.norm(bis) * radius / np.cos(0.5 * turn)
+                begin = pts[i + 1] - cut[i + 1] * a
+                pieces.append(_Piece(s, radius * turn, centre, (begin - centre) / radius, a, radius))
+                s += radius * turn
+        self._pieces = pieces
+        self._starts = np.array([p.s0 for p in pieces])
+        self._length = s
+        self._end = pts[-1].copy()
+
+    @property
+    def dof(self) -> int:
+        return self._dof
+
+    @property
+    def path_interval(self) -> np.ndarray:
+        return np.array([0.0, self._length])
+
+    @property
+    def waypoints(self) -> np.ndarray:
+        return self._waypoints
+
+    @property
+    def junctions(self) -> np.ndarray:
+        """Path positions (rad) where pieces meet, ends included."""
+        return np.append(self._starts, self._length)
+
+    def pieces(self) -> list[_Piece]:
+        """The lines and arcs, in order."""
+        return list(self._pieces)
+
+    def __call__(self, path_positions: float | np.ndarray, order: int = 0) -> np.ndarray:
+        scalar = np.ndim(path_positions) == 0
+        ss = np.clip(np.atleast_1d(np.asarray(path_positions, float)), 0.0, self._length)
+        idx = np.clip(np.searchsorted(self._starts, ss, side="right") - 1, 0, len(self._pieces) - 1)
+        out = np.zeros((len(ss), self._dof))
+        for k in np.unique(idx):
+            p = self._pieces[k]
+            m = idx == k
+            t = (ss[m] - p.s0)[:, None]
+            if p.radius == 0.0:
+                if order == 0:
+                    out[m] = p.p0 + t * p.u
+                elif order == 1:
+                    out[m] = p.u
+                continue  # order 2: a line has no curvature
+            th = t / p.radius
+            c, sn = np.cos(th), np.sin(th)
+            if order == 0:
+                out[m] = p.p0 + p.radius * (c * p.u + sn * p.v)
+            elif order == 1:
+                out[m] = -sn * p.u + c * p.v
+            elif order == 2:
+                out[m] = -(c * p.u + sn * p.v) / p.radius
+        if order == 0 and ss[-1] >= self._length:
+            out[ss >= self._length] = self._end  # the last waypoint exactly, no rounding drift
+        return out[0] if scalar else out
+
+    def arc_samples(self, step: float) -> list[tuple[int, np.ndarray]]:
+        """``(waypoint index, (m, dof) configurations)`` along each blend, at most ``step`` rad apart."""
+        out = []
+        arcs = iter(self.arcs)
+        for p in self._pieces:
+            if p.radius == 0.0:
+                continue
+            i, _ = next(arcs)
+            n = 2 * int(np.ceil(0.5 * p.length / step)) + 1  # odd: the arc's middle, its farthest point, is in
+            out.append((i, self(np.linspace(p.s0, p.s0 + p.length, n))))
+        return out
+
+
+@dataclass
+class BlendReport:
+    """What :func:`time_optimal` did: corners blended and stopped at, fall-backs, limit scale used."""
+
+    blended: int = 0
+    stops: int = 0
+    narrowed: int = 0  # blends redone narrower after a failed collision re-check
+    unblended: int = 0  # blends dropped (corner kept, robot stops there) after failed re-checks
+    trapezoid_pieces: int = 0  # pieces toppra could not time, timed rest-to-rest instead
+    limit_scale: float = 1.0
+
+
+def _grid(path: BlendedPath, line_step: float, arc_turn: float) -> np.ndarray:
+    """Grid points (rad of path): every junction, lines every ``line_step``, arcs every ``arc_turn`` rad of turn."""
+    grid = [np.zeros(1)]
+    for p in path.pieces():
+        h = line_step if p.radius == 0.0 else min(line_step, arc_turn * p.radius)
+        n = max(1, int(np.ceil(p.length / h)))
+        grid.append(p.s0 + np.linspace(0.0, p.length, n + 1)[1:])
+    g = np.concatenate(grid)
+    g[-1] = path.path_interval[1]
+    keep = np.concatenate([[True], np.diff(g) > 1e-12])
+    g = g[keep]
+    g[-1] = path.path_interval[1]
+    return g
+
+
+def _toppra(path: BlendedPath, vel: np.ndarray, acc: np.ndarray, path_speed: float | None,
+            grid: np.ndarray) -> toppra.ParametrizeConstAccel | None:
+    constraints: list = [toppra.constraint.JointVelocityConstraint(vel)]
+    if path_speed is not None:
+        # |q'(s)| = 1 (arc length), so capping every joint at |q_j'(s)| * path_speed caps s_dot at path_speed.
+        def vlim(s: float) -> np.ndarray:
+            cap = np.maximum(np.minimum(vel, np.abs(path(s, 1)) * path_speed), 1e-12)
+            return np.stack([-cap, cap], axis=1)
+
+        constraints.append(toppra.constraint.JointVelocityConstraintVarying(vlim))
+    constraints.append(toppra.constraint.JointAccelerationConstraint(
+        acc, discretization_scheme=toppra.constraint.DiscretizationType.Interpolation))
+    algo = toppra.algorithm.TOPPRA(constraints, path, gridpoints=grid, solver_wrapper="seidel",
+                                   parametrizer="ParametrizeConstAccel")
+    return algo.compute_trajectory(0.0, 0.0)
+
+
+def _sample(traj: toppra.ParametrizeConstAccel, rate_hz: float) -> tuple[np.ndarray, ...]:
+    """Times (s) at ``rate_hz`` plus every grid point's time, and positions, velocities, accelerations there."""
+    duration = float(traj.duration)
+    n = max(1, int(np.ceil(duration * rate_hz - 1e-9)))
+    t = np.union1d(np.linspace(0.0, duration, n + 1), np.asarray(traj._ts, float))
+    t = t[t <= duration]
+    return t, traj(t, 0), traj(t, 1), traj(t, 2)
+
+
+def _within(v: np.ndarray, a: np.ndarray, vel: np.ndarray, acc: np.ndarray) -> bool:
+    return bool(np.all(np.abs(v) <= vel * (1 + 1e-6) + 1e-9) and np.all(np.abs(a) <= acc * (1 + 1e-6) + 1e-9))
+
+
+def _time_piece(pts: np.ndarray, dev: np.ndarray, vel: np.ndarray, acc: np.ndarray, path_speed: float | None,
+                rate_hz: float, report: BlendReport) -> TimedPath:
+    """One rest-to-rest piece (no stop inside) through ``pts``, blended by ``dev``."""
+    path = BlendedPath(pts, dev)
+    if path.path_interval[1] <= 1e-9:
+        return time_parametrize(pts, vel, acc, rate_hz=rate_hz)
+    # At least 100 grid intervals (toppra's own default): a slow move's ramp from rest takes a whole interval.
+    grid = _grid(path, line_step=min(0.02, path.path_interval[1] / 100.0), arc_turn=0.05)
+    trapezoid = time_parametrize(pts, vel, acc, rate_hz=rate_hz)
+    for scale in (1.0, 0.97, 0.9, 0.8, 0.7):
+        traj = _toppra(path, vel * scale, acc * scale, None if path_speed is None else path_speed * scale, grid)
+        if traj is None:
+            break
+        if path_speed is None and traj.duration >= trapezoid.duration:
+            # Nothing to gain (a lone straight move, or corners so sharp the blends are passed almost at rest;
+            # toppra's grid then costs a few per cent): the trapezoid on the checked segments is as good.
+            break
+        t, q, v, a = _sample(traj, rate_hz)
+        if _within(v, a, vel, acc):
+            report.blended += len(path.arcs)
+            report.limit_scale = min(report.limit_scale, scale)
+            q[0], q[-1] = pts[0], pts[-1]
+            v[0] = v[-1] = 0.0
+            nearest = [int(np.argmin(np.linalg.norm(q - w, axis=1))) for w in pts]
+            nearest[0], nearest[-1] = 0, len(t) - 1
+            return TimedPath(times=t, positions=q, velocities=v, accelerations=a,
+                             waypoint_index=np.maximum.accumulate(np.array(nearest, dtype=int)))
+    # toppra failed, kept exceeding the limits or was no faster: rest-to-rest on the checked segments
+    report.trapezoid_pieces += 1
+    report.stops += len(pts) - 2
+    return trapezoid
+
+
+def _concat(parts: Sequence[TimedPath]) -> TimedPath:
+    times, pos, vel, acc, idx = [], [], [], [], []
+    t0, count = 0.0, 0
+    for k, p in enumerate(parts):
+        skip = 0 if k == 0 else 1  # the first sample of a piece is the last of the one before
+        times.append(p.times[skip:] + t0)
+        pos.append(p.positions[skip:])
+        vel.append(p.velocities[skip:])
+        acc.append(p.accelerations[skip:])
+        wi = p.waypoint_index + count - skip
+        idx.append(wi if k == 0 else wi[1:])
+        t0 += p.duration
+        count += len(p.times) - skip
+    return TimedPath(times=np.concatenate(times), positions=np.vstack(pos), velocities=np.vstack(vel),
+                     accelerations=np.vstack(acc), waypoint_index=np.concatenate(idx))
+
+
+def _limits(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    arr = np.full(dof, float(arr)) if arr.ndim == 0 else arr.reshape(-1)
+    if arr.shape != (dof,) or not np.all(np.isfinite(arr)) or not np.all(arr > 0):
+        raise UserError(f"time parametrisation: {name} must be {dof} finite values > 0 (got {np.asarray(value)!r})")
+    return arr
+
+
+def time_optimal(
+    path: np.ndarray,
+    v_max: float | np.ndarray,
+    a_max: float | np.ndarray,
+    *,
+    max_deviation: float = DEFAULT_DEVIATION,
+    stops: Sequence[int] = (),
+    path_speed: float | None = None,
+    is_valid: Callable[[np.ndarray], np.ndarray] | None = None,
+    check_step: float = 0.01,
+    rate_hz: float = 100.0,
+    report: BlendReport | None = None,
+) -> TimedPath:
+    """Time-optimal, blended parametrisation of ``path`` ``(n, dof)`` (radians); see the module docstring.
+
+    ``v_max`` (rad/s) and ``a_max`` (rad/s^2) are scalars or ``(dof,)``.
+    The robot is at rest at the first and last waypoints and at every waypoint
+    index in ``stops``; it passes every other waypoint within
+    ``max_deviation`` rad. ``path_speed`` (rad/s) caps the joint-space path
+    speed. ``is_valid`` re-checks the blends (sampled every ``check_step`` rad)
+    and narrows or drops those that fail. ``report`` (optional) is filled with
+    what was done. Samples are at least ``rate_hz`` per second.
+    """
+    pts = np.atleast_2d(np.asarray(path, dtype=float))
+    if pts.ndim != 2 or len(pts) == 0 or not np.all(np.isfinite(pts)):
+        raise UserError("time parametrisation: path must be a non-empty (n, dof) array of finite radians")
+    if not rate_hz > 0:
+        raise UserError(f"time parametrisation: rate_hz must be > 0 (got {rate_hz})")
+    if not max_deviation >= 0:
+        raise UserError(f"time parametrisation: max_deviation must be >= 0 radians (got {max_deviation})")
+    if path_speed is not None and not path_speed > 0:
+        raise UserError(f"time parametrisation: path_speed must be > 0 rad/s (got {path_speed})")
+    dof = pts.shape[1]
+    vel, acc = _limits(v_max, dof, "v_max"), _limits(a_max, dof, "a_max")
+    report = report if report is not None else BlendReport()
+    # Repeated waypoints carry no motion; keep the first of each run (their stops move to it).
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(pts, axis=0), axis=1) > 1e-12])
+    new_index = np.cumsum(keep) - 1
+    q = pts[keep]
+    stop = np.zeros(len(q), dtype=bool)
+    stop[[0, -1]] = True
+    for i in stops:
+        stop[new_index[int(i)]] = True
+    dev = np.full(len(q), float(max_deviation))
+    if len(q) >= 3:
+        d = np.diff(q, axis=0)
+        u = d / np.linalg.norm(d, axis=1)[:, None]
+        turn = np.arccos(np.clip(np.einsum("ij,ij->i", u[:-1], u[1:]), -1.0, 1.0))
+        stop[1:-1] |= (turn > _MAX_TURN) | ((turn >= _MIN_TURN) & (max_deviation <= 0.0))
+    dev[stop] = 0.0
+    if is_valid is not None and len(q) >= 3:
+        for _ in range(3):  # full, half, quarter deviation; then no blend
+            bad = [i for i, qs in BlendedPath(q, dev).arc_samples(check_step)
+                   if not np.all(np.asarray(is_valid(qs), bool))]
+            if not bad:
+                break
+            for i in bad:
+                if dev[i] > 0.3 * max_deviation:
+                    dev[i] *= 0.5
+                    report.narrowed += 1
+                else:
+                    dev[i], stop[i] = 0.0, True
+                    report.unblended += 1
+        else:
+            for i, qs in BlendedPath(q, dev).arc_samples(check_step):
+                if not np.all(np.asarray(is_valid(qs), bool)):
+                    dev[i], stop[i] = 0.0, True
+                    report.unblended += 1
+    cuts = np.flatnonzero(stop)
+    report.stops += len(cuts) - 2 if len(q) > 1 else 0
+    if len(q) == 1:
+        single = time_parametrize(q, vel, acc, rate_hz=rate_hz)
+        return TimedPath(single.times, single.positions, single.velocities, single.accelerations,
+                         np.zeros(len(pts), dtype=int))
+    parts = [_time_piece(q[a:b + 1], dev[a:b + 1], vel, acc, path_speed, rate_hz, report)
+             for a, b in itertools.pairwise(cuts)]
+    timed = _concat(parts)
+    # waypoint_index for the caller's waypoints (repeats share their first copy's sample)
+    timed.waypoint_index = timed.waypoint_index[new_index]
+    return timed
