@@ -113,6 +113,8 @@ contents read by mistake, such as ``--hand /etc/passwd``)."""
 
 def _echo(value: Any) -> str:
     """``value`` for an error message: short values as written, long texts by their length only."""
+    if hasattr(value, "tolist") and not isinstance(value, str | bytes):  # a numpy array: as the numbers written
+        value = value.tolist()
     if isinstance(value, str | bytes) and (len(value) > MAX_ECHO or "\n" in str(value)):
         return f"a text of {len(value)} characters"
     text = repr(value)
@@ -122,7 +124,8 @@ def _echo(value: Any) -> str:
 def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
     """First error of a pydantic ``ValidationError`` as ``key.path: reason (got value)``."""
     lines = []
-    for err in exc.errors():
+    # A misspelt key also makes the key it was meant to be "missing": the unknown key is the cause, said first.
+    for err in sorted(exc.errors(), key=lambda e: e["type"] != "extra_forbidden"):
         loc = _fmt_loc(tuple(p for p in err["loc"] if not (isinstance(p, str) and p.startswith("function-"))))
         path = ".".join(x for x in (prefix, loc) if x)
         msg = err["msg"]
@@ -137,7 +140,7 @@ def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
         elif "input" in err and not isinstance(err["input"], dict | list):
             msg = f"{msg} (got {_echo(err['input'])})"
         msg = msg.removeprefix("Value error, ")
-        lines.append(f"{path or '<root>'}: {msg}")
+        lines.append(f"{path}: {msg}" if path else msg)  # a check of the whole section speaks for itself
     more = f" (and {len(lines) - 1} more)" if len(lines) > 1 else ""
     return lines[0] + more
 

@@ -199,7 +199,7 @@ def load_parts(
         try:
             spec = PartSpec(name=path.stem, mesh=str(path.resolve()), mesh_units=units, center_of_mass=center_of_mass)
         except ValidationError as exc:
-            raise UserError(format_validation_error(exc, "center_of_mass")) from None
+            raise UserError(f"--com: {format_validation_error(exc)}") from None
         return [build_part(spec)]
     if suffix not in (".yaml", ".yml"):
         raise UserError(f"{path}: not a mesh ({', '.join(sorted(MESH_SUFFIXES))}) nor a part/structure YAML")

@@ -48,7 +48,7 @@ from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING, Any, ClassVar
 
-from pydantic import Field, ValidationError
+from pydantic import Field, ValidationError, field_validator
 
 from asmteach.core.config import format_validation_error, set_dotted
 from asmteach.core.errors import UserError
@@ -133,6 +133,19 @@ class ExperimentFile(StrictModel):
     grid: dict[str, list[Any]] = Field(default_factory=dict)
     seeds: int | list[int] = Field(1, description="an int N (seeds 0..N-1) or an explicit list")
     workers: int = Field(1, ge=1, le=64)
+
+    @field_validator("seeds")
+    @classmethod
+    def _seeds(cls, v: int | list[int]) -> int | list[int]:
+        # seeds: 0 would plan no trial at all, a negative seed fails in the middle of a trial
+        if isinstance(v, int) and v < 1:
+            raise ValueError("give a number of seeds >= 1, or a list of seeds")
+        if isinstance(v, list):
+            if not v or any(s < 0 for s in v):
+                raise ValueError("give a non-empty list of seeds, each >= 0")
+            if len(set(v)) != len(v):
+                raise ValueError("a seed is listed twice; each (grid point, seed) is one trial")
+        return v
 
     def seed_list(self) -> list[int]:
         return list(range(self.seeds)) if isinstance(self.seeds, int) else list(self.seeds)

@@ -61,18 +61,38 @@ def check_demonstration(task: AssemblyTask, demo: dict, camera_file: Path | None
 def resolve_camera(explicit: str | None, cfg: RunConfig | None, frames: Path | None) -> tuple[CameraIntrinsics, str]:
     """Intrinsics from ``--camera``, else the config's ``camera``, else ``camera.yaml`` next to the frames,
     else the C615-like default; returns the camera and where it came from."""
-    from asmteach.plugins.detectors.aruco.camera import c615_like, load_camera
+    from asmteach.plugins.detectors.aruco.camera import c615_like
 
     if explicit:
-        return load_camera(explicit), explicit
+        return _camera_noting_distortion(explicit), explicit
     if cfg is not None and cfg.camera:
         p = cfg.path(cfg.camera)
-        return load_camera(p), str(p)
+        return _camera_noting_distortion(p), str(p)
     if frames is not None:
         folder = frames if frames.is_dir() else frames.parent
         if (folder / "camera.yaml").is_file():
-            return load_camera(folder / "camera.yaml"), str(folder / "camera.yaml")
+            return _camera_noting_distortion(folder / "camera.yaml"), str(folder / "camera.yaml")
     return c615_like(), "default C615-like intrinsics"
+
+
+def _camera_noting_distortion(path: str | Path) -> CameraIntrinsics:
+    """:func:`~.camera.load_camera`, with a warning when the file gives no distortion (taken as none): a real
+    webcam's lens distortion left out shifts marker corners by pixels at the image edges."""
+    import logging
+
+    from asmteach.core.io import read_yaml
+    from asmteach.plugins.detectors.aruco.camera import load_camera
+
+    camera = load_camera(path)
+    try:
+        raw = read_yaml(path)
+    except UserError:
+        raw = None  # an OpenCV FileStorage file: load_camera read it
+    if isinstance(raw, dict) and "distortion_coefficients" not in raw:
+        logging.getLogger("asmteach").warning(
+            "%s gives no distortion_coefficients: the camera is taken as distortion-free; calibrate it "
+            "(asmteach calibrate) or write zeros to say so", path)
+    return camera
 
 
 def _load_cfg(path: str) -> RunConfig:

@@ -129,7 +129,12 @@ class ViewDatabase:
     def load(cls, path: Path) -> ViewDatabase:
         """Read a database written by :meth:`save`."""
         with np.load(path, allow_pickle=False) as z:
-            return cls(key=str(z["key"]), **{k: z[k] for k in _ARRAYS})
+            db = cls(key=str(z["key"]), **{k: z[k] for k in _ARRAYS})
+        n_regions = len(db.hists)
+        if (db.hists.ndim != 2 or len(db.region_view) != n_regions or len(db.region_centroids) != n_regions
+                or not all(np.all(np.isfinite(getattr(db, k))) for k in _ARRAYS)):
+            raise ValueError("the arrays do not fit together (or hold NaN)")
+        return db
 
 
 _ARRAYS = ("T_acam_part", "centroids", "crh", "hists", "region_view", "region_centroids", "view_dirs")
@@ -285,8 +290,8 @@ def load_or_build(
             db = ViewDatabase.load(path)
             if db.key == key:
                 return db, False
-        except (OSError, ValueError, KeyError) as exc:  # a damaged cache is rebuilt, not fatal
-            log.warning("view database %s is unreadable (%s); rebuilding it", path, exc)
+        except Exception as exc:  # noqa: BLE001 - zip (BadZipFile), EOF, npy and key errors alike: rebuilt, not fatal
+            log.warning("view database %s is unreadable (%s: %s); rebuilding it", path, type(exc).__name__, exc)
     db = build_views(mesh, views, desc, camera, key=key)
     try:
         db.save(path)
