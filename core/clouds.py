@@ -425,7 +425,7 @@ def _read_open3d(p: Path) -> Cloud:
         if eye is not None:
             T = geometry.from_rotation(np.eye(3), eye)
     if len(pts) == 0 and p.stat().st_size > 0:
-        raise UserError(f"{p}: no points could be read (Open3D); is it a point-cloud {p.suffix} file?")
+        raise UserError(f"{p}: no points read: the file holds none, or is not a point-cloud {p.suffix} Open3D reads")
     return Cloud(points=pts, fields=fields, width=len(pts), height=1, T_data_sensor=T, path=p, encoding="open3d")
 
 

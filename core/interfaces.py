@@ -83,6 +83,12 @@ class PartModel:
 
     ``mesh`` is a watertight ``trimesh.Trimesh`` in the part frame (metres);
     ``center_of_mass`` is in the part frame; ``mass`` in kg.
+
+    A part given as a scan (a PCD/PLY point cloud, :func:`asmteach.core.parts.build_cloud_part`) has
+    ``points`` ((n, 3), part frame = the file's frame, metres) and ``scan_viewpoint`` (the scanner's centre
+    in the part frame, metres, or ``None`` when unknown; it orients the scan's normals). Its ``mesh`` is
+    then only the points' convex hull, a stand-in for size and bounds: a detector that needs the surface
+    (rendered views, ray casting) cannot use such a part; one that can says so with ``takes_cloud_models``.
     """
 
     spec: PartSpec
@@ -90,6 +96,8 @@ class PartModel:
     mass: float
     center_of_mass: np.ndarray
     source_hash: str = ""
+    points: np.ndarray | None = None
+    scan_viewpoint: np.ndarray | None = None
 
     @property
     def name(self) -> str:
@@ -141,6 +149,9 @@ class Teacher(Plugin):
 # ---------------------------------------------------------------- detection
 class Detector(Plugin):
     """Finds the pose of one known part in a depth point cloud."""
+
+    takes_cloud_models: ClassVar[bool] = False
+    """Whether the detector works from a part given as a scan (``PartModel.points``), not only a mesh."""
 
     def prepare(self, part: PartModel) -> None:
         """Build or load per-part data (view databases); called once per part."""

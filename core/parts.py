@@ -26,8 +26,10 @@ from asmteach.core.models import AssemblyTask, PartSpec, Primitive, SolidSpec, r
 
 __all__ = [
     "MESH_SUFFIXES",
+    "build_cloud_part",
     "build_part",
     "build_solid",
+    "is_cloud_file",
     "load_mesh_file",
     "load_part_spec",
     "load_parts",
@@ -115,8 +117,75 @@ def mesh_hash(mesh: trimesh.Trimesh) -> str:
     return h.hexdigest()[:16]
 
 
+def is_cloud_file(path: Path) -> bool:
+    """Whether ``path`` is a point cloud (PCD, XYZ, a PLY without faces), not a mesh."""
+    from asmteach.core.clouds import CLOUD_SUFFIXES
+
+    suffix = path.suffix.lower()
+    if suffix not in CLOUD_SUFFIXES:
+        return False
+    if suffix != ".ply":
+        return True
+    try:
+        with path.open("rb") as fh:
+            head = fh.read(65536)
+    except OSError:
+        return False
+    for raw in head.split(b"\n"):
+        words = raw.decode("ascii", errors="replace").split()
+        if words[:2] == ["element", "face"]:
+            return len(words) > 2 and words[2] == "0"
+        if words[:1] == ["end_header"]:
+            break
+    return True
+
+
+def build_cloud_part(spec: PartSpec, path: Path) -> PartModel:
+    """A part given as a scan: its points (the file's frame is the part frame, metres) and their convex hull.
+
+    The hull stands in for the mesh (size, bounds, a nominal mass); the points are what a detector that
+    takes cloud models matches. The scanner's centre comes from the file (a PCD ``VIEWPOINT``, a PLY
+    ``comment viewpoint``) or, for a cloud in a camera's frame (every point at z > 0), the origin.
+    """
+    from scipy.spatial import QhullError
+
+    from asmteach.core.clouds import read_cloud
+
+    cloud = read_cloud(path, units=spec.mesh_units, kind="part", what=f"part {spec.name!r}")
+    pts = cloud.valid_points()
+    if len(pts) < 100:
+        raise UserError(f"{path}: a part's scan needs at least 100 valid points, it has {len(pts)}")
+    eye = cloud.viewpoint
+    if eye is None and np.all(pts[:, 2] > 0):
+        eye = np.zeros(3)  # a sensor's own frame: the scanner is at the origin
+    # Thickness across the points' best plane: a scan of one flat face holds no shape to match.
+    centred = pts - pts.mean(axis=0)
+    thickness = float(np.ptp(centred @ np.linalg.svd(centred, full_matrices=False)[2][2]))
+    try:
+        if thickness < MIN_EXTENT_M:
+            raise QhullError
+        hull = trimesh.convex.convex_hull(pts)
+    except QhullError:
+        raise UserError(
+            f"{path}: the scan is flat (within {MIN_EXTENT_M * 1000:.0f} mm of a plane); a part's scan must show its "
+            "shape"
+        ) from None
+    ext = float(np.max(hull.extents))
+    if ext < MIN_EXTENT_M:
+        raise UserError(f"{path}: the scan is only {ext * 1000:.3f} mm across; it is degenerate or in the wrong units")
+    h = hashlib.sha256(np.round(pts, 7).astype("<f8").tobytes()).hexdigest()[:16]
+    mass = spec.mass if spec.mass is not None else spec.density * float(hull.volume)
+    com = np.asarray(spec.center_of_mass if spec.center_of_mass is not None else hull.center_mass, dtype=float)
+    for note in cloud.notes:
+        log.warning("%s: %s", path.name, note)
+    return PartModel(spec=spec, mesh=hull, mass=float(mass), center_of_mass=com, source_hash=f"scan-{h}",
+                     points=pts, scan_viewpoint=eye)
+
+
 def build_part(spec: PartSpec, base_dir: Path | None = None) -> PartModel:
-    """Mesh, mass and centre of mass of a part spec."""
+    """Mesh, mass and centre of mass of a part spec (a ``mesh`` that is a point cloud: :func:`build_cloud_part`)."""
+    if spec.mesh is not None and is_cloud_file(resolve_relative(spec.mesh, base_dir or Path.cwd())):
+        return build_cloud_part(spec, resolve_relative(spec.mesh, base_dir or Path.cwd()))
     if spec.solid is not None:
         mesh = build_solid(spec.solid)
     else:
@@ -195,14 +264,17 @@ def load_parts(
     if not path.is_file():
         raise UserError(f"{path}: no such file")
     suffix = path.suffix.lower()
-    if suffix in MESH_SUFFIXES:
+    if suffix in MESH_SUFFIXES or is_cloud_file(path):
         try:
             spec = PartSpec(name=path.stem, mesh=str(path.resolve()), mesh_units=units, center_of_mass=center_of_mass)
         except ValidationError as exc:
             raise UserError(f"--com: {format_validation_error(exc)}") from None
         return [build_part(spec)]
     if suffix not in (".yaml", ".yml"):
-        raise UserError(f"{path}: not a mesh ({', '.join(sorted(MESH_SUFFIXES))}) nor a part/structure YAML")
+        raise UserError(
+            f"{path}: not a mesh ({', '.join(sorted(MESH_SUFFIXES))}), a point cloud (.pcd, .xyz) nor a part/structure "
+            "YAML"
+        )
     raw = read_yaml(path)
     base = path.resolve().parent
     if isinstance(raw, dict) and "part_a" in raw:

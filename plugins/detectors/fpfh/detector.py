@@ -6,6 +6,12 @@ to the model's (a dense surface sample of the mesh) and Open3D's feature
 RANSAC, seeded from the plugin seed, proposes the pose; ICP refines it and
 the verification accepts or rejects it. A rejected pose triggers another
 RANSAC round (``attempts``).
+
+A part given as a scan (``PartModel.points``: a PCD/PLY cloud, no mesh) is
+matched the same way from its own points, their normals pointing at the
+scanner (``PartModel.scan_viewpoint``; outward from the centroid when
+unknown). Its verification has no surface to cast rays at or to rest on the
+table: it checks both directions on points instead (:func:`verify_scan`).
 """
 
 from __future__ import annotations
@@ -20,7 +26,14 @@ from asmteach.core import geometry
 from asmteach.core.interfaces import Detector, PartModel
 from asmteach.core.models import Detection, StrictModel, TablePlane, Vec3
 from asmteach.plugins.detectors.cvfh.detector import StageClock, resolve_viewpoint
-from asmteach.plugins.detectors.cvfh.refine import ModelCloud, RefineSettings, Verdict, icp_refine, model_cloud, verify
+from asmteach.plugins.detectors.cvfh.refine import (
+    ModelCloud,
+    RefineSettings,
+    Verdict,
+    icp_refine,
+    model_cloud,
+    verify,
+)
 from asmteach.plugins.detectors.cvfh.segment import (
     SegmentSettings,
     check_cloud,
@@ -32,7 +45,7 @@ from asmteach.plugins.detectors.cvfh.segment import (
 
 import open3d as o3d  # isort: skip
 
-__all__ = ["FpfhRansacDetector"]
+__all__ = ["FpfhRansacDetector", "scan_model", "verify_scan"]
 
 reg = o3d.pipelines.registration
 
@@ -56,6 +69,11 @@ class FpfhSettings(StrictModel):
     attempts: int = Field(3, ge=1, description="RANSAC rounds until a pose verifies")
     max_clusters: int = Field(3, ge=1, description="largest plausible clusters tried, biggest first")
     size_slack: float = Field(1.25, ge=1.0, description="a cluster wider than this times the part's is skipped")
+    scan_spacing: float = Field(0.002, gt=0.0, description="voxel size a part given as a scan is thinned to, metres")
+    scan_min_coverage: float = Field(
+        0.7, ge=0.0, le=1.0,
+        description="part given as a scan: least share of its points facing the camera that lie on seen points",
+    )
 
 
 @dataclass
@@ -71,6 +89,7 @@ class FpfhRansacDetector(Detector):
 
     Settings = FpfhSettings
     settings: FpfhSettings
+    takes_cloud_models = True
 
     def __init__(self, settings=None, *, seed: int = 0) -> None:  # type: ignore[no-untyped-def]
         super().__init__(settings, seed=seed)
@@ -84,7 +103,10 @@ class FpfhRansacDetector(Detector):
         key = part.source_hash or part.name
         if key not in self._prepared:
             s = self.settings
-            model = model_cloud(part.mesh, s.refine.model_points, seed=self.seed)
+            if part.points is not None:
+                model = scan_model(part, s.scan_spacing, s.normal_radius)
+            else:
+                model = model_cloud(part.mesh, s.refine.model_points, seed=self.seed)
             down = model.pcd.voxel_down_sample(s.voxel)
             feats = reg.compute_fpfh_feature(down, o3d.geometry.KDTreeSearchParamHybrid(s.feature_radius, 100))
             diameter = float(np.linalg.norm(np.ptp(np.asarray(part.mesh.vertices), axis=0)))
@@ -156,7 +178,10 @@ class FpfhRansacDetector(Detector):
                 T0 = geometry.invert(np.asarray(res.transformation))
                 T = icp_refine(np.asarray(src.points), prep.model, T0, s.refine)
                 clock.lap("icp")
-                v = verify(T, cluster, context, eye, prep.model, s.refine, table)
+                if part.points is not None:
+                    v = verify_scan(T, cluster, context, eye, prep.model, s.refine, s.scan_min_coverage)
+                else:
+                    v = verify(T, cluster, context, eye, prep.model, s.refine, table)
                 clock.lap("verify")
                 if closest is None or v.score > closest.score:
                     closest = v
@@ -186,9 +211,78 @@ class FpfhRansacDetector(Detector):
                 "clusters": len(clusters),
                 "table": table.model_dump(mode="json"),
                 "viewpoint": eye.tolist(),
+                **({"model": "scan", "coverage": best.coverage} if part.points is not None else {}),
             },
         )
 
 
 def _width(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.ptp(points, axis=0)))
+
+
+def scan_model(part: PartModel, spacing: float, normal_radius: float) -> ModelCloud:
+    """The model cloud of a part given as a scan: its points thinned to ``spacing`` (metres), with normals.
+
+    Normals point at the scanner (``part.scan_viewpoint``, part frame) as the scene's point at the camera,
+    so FPFH sees the same signs on both; outward from the centroid when the scanner is unknown (a merged
+    all-round scan). The mesh fields hold the points' convex hull, used for size only.
+    """
+    pcd = to_o3d(np.asarray(part.points, dtype=float)).voxel_down_sample(spacing)
+    pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(normal_radius, 30))
+    pts = np.asarray(pcd.points)
+    nrm = np.asarray(pcd.normals)
+    if part.scan_viewpoint is not None:
+        pcd.orient_normals_towards_camera_location(np.asarray(part.scan_viewpoint, dtype=float))
+    else:
+        flip = np.einsum("ij,ij->i", nrm, pts - pts.mean(axis=0)) < 0
+        nrm[flip] *= -1.0
+        pcd.normals = o3d.utility.Vector3dVector(nrm)
+    nrm = np.asarray(pcd.normals)
+    hull = part.mesh
+    center = np.asarray(hull.bounds).mean(axis=0)
+    scene = o3d.t.geometry.RaycastingScene()  # empty: a scan has no surface to cast rays at
+    return ModelCloud(pts, nrm, hull, pcd, float(np.max(np.linalg.norm(pts - center, axis=1))), center,
+                      np.asarray(hull.vertices, dtype=float), scene)
+
+
+def verify_scan(
+    T_world_part: np.ndarray,
+    cluster: np.ndarray,
+    context: np.ndarray,
+    viewpoint: np.ndarray,
+    model: ModelCloud,
+    s: RefineSettings,
+    min_coverage: float,
+) -> Verdict:
+    """Score a pose of a part given as a scan, on points both ways (world frame, metres).
+
+    * fitness: the share of the observed ``cluster`` within ``s.inlier_distance`` of a model point (and
+      the RMSE of those), as :func:`verify` does against a mesh;
+    * coverage: the share of the model's points facing the camera at ``viewpoint`` that lie within
+      ``s.inlier_distance`` of a seen point of ``context``: a pose that puts the scan where nothing was
+      seen explains the cluster but not the scan.
+
+    No free-space or support test: both need the part's closed surface, which a scan does not give.
+    """
+    from scipy.spatial import cKDTree
+
+    local = geometry.transform_points(geometry.invert(T_world_part), cluster)
+    d, _ = cKDTree(model.points).query(local, k=1)
+    inl = d < s.inlier_distance
+    fitness = float(inl.mean()) if len(d) else 0.0
+    rmse = float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else float("inf")
+    world = geometry.transform_points(T_world_part, model.points)
+    normals = model.normals @ np.asarray(T_world_part)[:3, :3].T
+    facing = np.einsum("ij,ij->i", normals, np.asarray(viewpoint, dtype=float) - world) > 0
+    coverage = 0.0
+    if facing.any() and len(context):
+        dc, _ = cKDTree(context).query(world[facing], k=1)
+        coverage = float(np.mean(dc < s.inlier_distance))
+    why = None
+    if fitness < s.min_fitness:
+        why = f"fitness {fitness:.2f} < {s.min_fitness:.2f}"
+    elif rmse > s.max_rmse:
+        why = f"inlier RMSE {rmse * 1000:.2f} mm > {s.max_rmse * 1000:.2f} mm"
+    elif coverage < min_coverage:
+        why = f"the seen points explain {100 * coverage:.0f}% of the scan's side facing the camera"
+    return Verdict(T_world_part, fitness, rmse, 0.0, float("nan"), why is None, why, coverage, float("nan"))

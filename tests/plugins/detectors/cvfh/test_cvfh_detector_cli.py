@@ -75,14 +75,13 @@ def test_detect_bad_input(
     assert main(["detect", str(folder / "nope.yaml"), "--cloud", str(ply), "--out", str(out)]) == 2
     assert main(["detect", str(STRUCTURE), "--cloud", str(STRUCTURE), "--out", str(out)]) == 2
     capsys.readouterr()
-    # A cloud in millimetres and an empty cloud: found false with the reason, exit 1.
+    # A cloud in millimetres given as metres, and an empty cloud: the cloud reader refuses them in one line.
     points = np.asarray(o3d.io.read_point_cloud(str(ply)).points)
-    for name, cloud, words in (
-        ("mm.ply", points * 1000.0, "millimetres"),
-        ("empty.ply", np.zeros((0, 3)), "empty"),
+    for name, cloud, words, extra in (
+        ("mm.ply", points * 1000.0, "millimetres", ["--cloud-units", "m"]),
+        ("empty.ply", np.zeros((0, 3)), "no points", []),
     ):
         path = _write_cloud(folder / name, cloud)
-        assert main(["detect", str(STRUCTURE), "--cloud", str(path), "--out", str(out)]) == 1
-        doc = json.loads(out.read_text())
-        assert doc["found"] is False and words in doc["reason"] and doc["rough"] is None
-        assert "not found" in capsys.readouterr().out
+        assert main(["detect", str(STRUCTURE), "--cloud", str(path), "--out", str(out), *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and words in err[0] and not out.exists()
