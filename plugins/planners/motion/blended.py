@@ -38,8 +38,9 @@ segments themselves and are not re-checked.
 **Limits.** The accelerations of the path jump where a line meets an arc;
 TOPP-RA enforces its constraints at grid points only, and the grid has a point
 at every such junction and is dense along arcs. The result is then sampled
-(``rate_hz``, plus every grid point) and its velocities and accelerations are
-checked against the limits; if any exceeds them, the limits given to TOPP-RA
+evenly (``rate_hz``; these samples are what the robot gets) and its
+velocities and accelerations there and at every grid point are checked
+against the limits; if any exceeds them, the limits given to TOPP-RA
 are scaled down and it runs again. If TOPP-RA fails on a piece, or is no
 faster there than the trapezoid (a lone straight move: its grid costs a few per
 cent), that piece is timed with the trapezoid on the checked segments, so the
@@ -249,12 +250,22 @@ def _toppra(path: BlendedPath, vel: np.ndarray, acc: np.ndarray, path_speed: flo
 
 
 def _sample(traj: toppra.ParametrizeConstAccel, rate_hz: float) -> tuple[np.ndarray, ...]:
-    """Times (s) at ``rate_hz`` plus every grid point's time, and positions, velocities, accelerations there."""
+    """Times (s) evenly at ``rate_hz`` and positions, velocities, accelerations there."""
     duration = float(traj.duration)
     n = max(1, int(np.ceil(duration * rate_hz - 1e-9)))
-    t = np.union1d(np.linspace(0.0, duration, n + 1), np.asarray(traj._ts, float))
-    t = t[t <= duration]
+    t = np.linspace(0.0, duration, n + 1)
     return t, traj(t, 0), traj(t, 1), traj(t, 2)
+
+
+def _grid_kinematics(traj: toppra.ParametrizeConstAccel) -> tuple[np.ndarray, np.ndarray]:
+    """Velocities and accelerations at every grid point's time, where the path acceleration switches.
+
+    They are checked but not sent: a grid time a few microseconds from an even sample would make an interval
+    whose finite differences only measure rounding.
+    """
+    t = np.asarray(traj._ts, float)  # the grid's times (toppra keeps them in this attribute)
+    t = t[t <= float(traj.duration)]
+    return traj(t, 1), traj(t, 2)
 
 
 def _within(v: np.ndarray, a: np.ndarray, vel: np.ndarray, acc: np.ndarray) -> bool:
@@ -279,7 +290,7 @@ def _time_piece(pts: np.ndarray, dev: np.ndarray, vel: np.ndarray, acc: np.ndarr
             # toppra's grid then costs a few per cent): the trapezoid on the checked segments is as good.
             break
         t, q, v, a = _sample(traj, rate_hz)
-        if _within(v, a, vel, acc):
+        if _within(v, a, vel, acc) and _within(*_grid_kinematics(traj), vel, acc):
             report.blended += len(path.arcs)
             report.limit_scale = min(report.limit_scale, scale)
             q[0], q[-1] = pts[0], pts[-1]
