@@ -67,6 +67,20 @@ class PartCorpus(Experiment):
 
     Params = PartCorpusParams
 
+    def check(self, params: PartCorpusParams) -> None:
+        """A corpus part name that names no part fails the sweep before its first trial (not every trial)."""
+        from asmteach.core import corpus
+
+        name = params.part
+        if name.startswith("ff_"):
+            known = any(corpus._free_form_name(rel) == name for rel in corpus.PYBULLET_MESHES)
+        else:
+            family, _, index = name.rpartition("_")
+            known = family in corpus._CSG and index.isdigit()
+        if not known:
+            raise UserError(f"params.part: no corpus part {name!r}; give '<family>_<index>' (families: "
+                            f"{', '.join(corpus.FAMILIES)}) or 'ff_<mesh stem>'")
+
     def run_trial(self, params: PartCorpusParams, seed: int, workdir: Path) -> dict[str, Any]:
         from asmteach.core.convex_pieces import decompose
         from asmteach.core.corpus import corpus_part, write_cad_stl
