@@ -211,7 +211,11 @@ class FpfhRansacDetector(Detector):
                 "clusters": len(clusters),
                 "table": table.model_dump(mode="json"),
                 "viewpoint": eye.tolist(),
-                **({"model": "scan", "coverage": best.coverage} if part.points is not None else {}),
+                **(
+                    {"model": "scan", "coverage": best.coverage, "contradicted": best.contradicted}
+                    if part.points is not None
+                    else {}
+                ),
             },
         )
 
@@ -258,11 +262,15 @@ def verify_scan(
 
     * fitness: the share of the observed ``cluster`` within ``s.inlier_distance`` of a model point (and
       the RMSE of those), as :func:`verify` does against a mesh;
-    * coverage: the share of the model's points facing the camera at ``viewpoint`` that lie within
-      ``s.inlier_distance`` of a seen point of ``context``: a pose that puts the scan where nothing was
-      seen explains the cluster but not the scan.
+    * along the camera's rays (``viewpoint``), for the model's points facing the camera: ``coverage``, the
+      share whose seen depth (nearest observed ray of ``context`` within ``s.ray_radius``) is within
+      ``s.surface_fit`` of theirs, must reach ``min_coverage``; ``contradicted``, the share where the camera
+      saw farther than the model by more than ``s.surface_off`` (the model is not there), must stay under
+      ``s.max_contradicted``. A scan too big for the object, or put where nothing was seen, fails these.
 
-    No free-space or support test: both need the part's closed surface, which a scan does not give.
+    No support test: it needs the part's underside, which a scan does not show. Points facing the camera
+    stand in for the visible ones (a scan has no surface to cast rays at for self-occlusion; a point hidden
+    by the part itself sees a nearer depth, which counts as no evidence, not as a contradiction).
     """
     from scipy.spatial import cKDTree
 
@@ -271,18 +279,54 @@ def verify_scan(
     inl = d < s.inlier_distance
     fitness = float(inl.mean()) if len(d) else 0.0
     rmse = float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else float("inf")
+    eye = np.asarray(viewpoint, dtype=float)
     world = geometry.transform_points(T_world_part, model.points)
     normals = model.normals @ np.asarray(T_world_part)[:3, :3].T
-    facing = np.einsum("ij,ij->i", normals, np.asarray(viewpoint, dtype=float) - world) > 0
-    coverage = 0.0
-    if facing.any() and len(context):
-        dc, _ = cKDTree(context).query(world[facing], k=1)
-        coverage = float(np.mean(dc < s.inlier_distance))
+    facing = np.einsum("ij,ij->i", normals, eye - world) > 0
+    coverage, contradicted = _along_rays(world[facing], context, eye, s)
     why = None
     if fitness < s.min_fitness:
         why = f"fitness {fitness:.2f} < {s.min_fitness:.2f}"
     elif rmse > s.max_rmse:
         why = f"inlier RMSE {rmse * 1000:.2f} mm > {s.max_rmse * 1000:.2f} mm"
+    elif contradicted > s.max_contradicted:
+        why = f"the camera saw through {100 * contradicted:.0f}% of the scan's side facing it"
     elif coverage < min_coverage:
-        why = f"the seen points explain {100 * coverage:.0f}% of the scan's side facing the camera"
-    return Verdict(T_world_part, fitness, rmse, 0.0, float("nan"), why is None, why, coverage, float("nan"))
+        why = f"the seen depth explains {100 * coverage:.0f}% of the scan's side facing the camera"
+    return Verdict(T_world_part, fitness, rmse, 0.0, float("nan"), why is None, why, coverage, contradicted)
+
+
+def _along_rays(points: np.ndarray, context: np.ndarray, eye: np.ndarray, s: RefineSettings) -> tuple[float, float]:
+    """(coverage, contradicted) of model ``points`` (world) against the seen ``context`` along rays from ``eye``.
+
+    Each point's nearest observed ray within ``s.ray_radius`` (rays as points of a plane 1 m in front of
+    the eye, as :func:`~asmteach.plugins.detectors.cvfh.refine.surface_check` does); points without one,
+    or hidden by something nearer, give no evidence. ``(0, 1)`` when nothing can be judged.
+    """
+    from scipy.spatial import cKDTree
+
+    if len(points) == 0 or len(context) == 0:
+        return 0.0, 1.0
+    axis = points.mean(axis=0) - eye
+    axis /= np.linalg.norm(axis)
+    e1 = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    basis = np.column_stack([e1, np.cross(axis, e1)])
+
+    def plane(u: np.ndarray) -> np.ndarray:
+        return (u @ basis) / (u @ axis)[:, None]
+
+    obs = context - eye
+    obs = obs[obs @ axis > 0]
+    if len(obs) == 0:
+        return 0.0, 1.0
+    obs_dist = np.linalg.norm(obs, axis=1)
+    rel = points - eye
+    dist = np.linalg.norm(rel, axis=1)
+    gap, j = cKDTree(plane(obs)).query(plane(rel), distance_upper_bound=s.ray_radius)
+    found = np.isfinite(gap)
+    delta = obs_dist[j[found]] - dist[found]
+    judged = int(np.sum(delta >= -s.surface_off))  # a nearer surface hides the point: no evidence
+    if judged == 0:
+        return 0.0, 1.0
+    return float(np.sum(np.abs(delta) <= s.surface_fit)) / judged, float(np.sum(delta > s.surface_off)) / judged

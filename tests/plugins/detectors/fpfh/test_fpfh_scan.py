@@ -48,7 +48,8 @@ def test_milk_found_at_identity(milk: tuple[PartModel, clouds.WorldCloud, Path])
     assert a.found, a.reason
     mm, deg = _error(geometry.invert(wc.T_world_cam) @ a.rough)  # the pose in the camera frame: truth = identity
     assert mm < MAX_MM and deg < MAX_DEG, (mm, deg)
-    assert a.details["model"] == "scan" and a.details["coverage"] > 0.9 and a.fitness > 0.95
+    assert a.details["model"] == "scan" and a.details["coverage"] > 0.9 and a.details["contradicted"] < 0.05
+    assert a.fitness > 0.95
     b = FpfhRansacDetector(seed=0).detect(wc.points, part, TablePlane(height=0.0), viewpoint=wc.viewpoint)
     assert np.allclose(a.rough, b.rough, atol=1e-6)  # seeded: the same pose again
 
@@ -130,3 +131,23 @@ def test_scan_as_a_part_file(tmp_path: Path) -> None:
     clouds.write_pcd(tmp_path / "flat.pcd", flat)
     with pytest.raises(UserError, match="flat"):
         load_parts(tmp_path / "flat.pcd")
+
+
+def test_verify_scan_along_rays(milk: tuple[PartModel, clouds.WorldCloud, Path]) -> None:
+    """The true pose is explained along the camera's rays; the same scan 3 cm aside or 3 cm nearer is not."""
+    from asmteach.plugins.detectors.fpfh.detector import FpfhSettings, scan_model, verify_scan
+
+    part, wc, _ = milk
+    s = FpfhSettings()
+    model = scan_model(part, s.scan_spacing, s.normal_radius)
+    pts = wc.points[np.all(np.isfinite(wc.points), axis=1)]
+    T = wc.T_world_cam  # the truth: the scan's frame is the camera's
+    cluster = geometry.transform_points(T, model.points)
+    context = pts[np.linalg.norm(pts - cluster.mean(axis=0), axis=1) < 0.4]
+    ok = verify_scan(T, cluster, context, wc.viewpoint, model, s.refine, s.scan_min_coverage)
+    assert ok.accepted and ok.coverage > 0.95 and ok.contradicted < 0.01, ok
+    toward = wc.viewpoint - cluster.mean(axis=0)
+    for shift in (np.array([0.03, 0.0, 0.0]), 0.03 * toward / np.linalg.norm(toward)):  # aside; toward the camera
+        moved = geometry.from_rotation(np.eye(3), shift) @ T
+        bad = verify_scan(moved, cluster, context, wc.viewpoint, model, s.refine, s.scan_min_coverage)
+        assert not bad.accepted and bad.coverage < 0.5, bad
