@@ -1,14 +1,14 @@
 """The one point-cloud reader: PCD (ascii, binary, binary_compressed), PLY and XYZ, units, and frames.
 
-Every cloud asmteach reads goes through :func:`read_cloud`: the scenes ``asmteach detect`` is given, a
-part's model given as a scan, the benchmarks' real Kinect files and our own renders
-(:func:`asmteach.plugins.detectors.depth_camera.write_cloud_ply`).
+:func:`read_cloud` reads the scenes ``asmteach detect`` is given (real Kinect files as well as our own
+renders, :func:`asmteach.plugins.detectors.depth_camera.write_cloud_ply`) and a part's model given as a
+scan (:func:`asmteach.core.parts.build_cloud_part`).
 
 What a file may hold, and what comes back (:class:`Cloud`):
 
 * PCD v0.7 (PCL's format), all three encodings. ``binary_compressed`` is PCL's LZF-compressed
-  structure-of-arrays layout, decompressed by :func:`lzf_decompress` (pure Python, ~0.3 s for a 640x480
-  Kinect frame: no C extension to build, and the one path CI tests).
+  structure-of-arrays layout, decompressed by :func:`lzf_decompress` (pure Python, 0.4-0.6 s for a
+  640x480 Kinect frame: no C extension to build, and the one path CI tests).
   Organized clouds (``HEIGHT > 1``) keep their NaN rows, so ``points.reshape(height, width, 3)`` is the
   depth image's grid; extra fields (``label``, ``rgb``/``rgba``, normals, anything) come back in
   ``fields`` by name, one row per point. The ``VIEWPOINT tx ty tz qw qx qy qz`` header is the sensor's
@@ -26,7 +26,8 @@ the detectors want the world frame (z up, the table top at the configured height
 maps a camera-frame cloud to the world with either the camera's pose from an extrinsics file
 (:func:`load_extrinsics`) or, when none is given, the table plane found in the cloud
 (:func:`table_frame`: z along the table normal toward the camera, x along the optical axis projected on
-the table, origin below the camera at the table height), and says which it used.
+the table, origin below the camera at the table height), and says which it used. :func:`guess_frame`
+tells a camera-frame cloud from a world-frame one.
 """
 
 from __future__ import annotations
