@@ -42,6 +42,8 @@ instead (:func:`~asmteach.plugins.detectors.cvfh.resting.near_twins`).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,6 +64,7 @@ __all__ = [
     "Verdict",
     "icp_refine",
     "model_cloud",
+    "one_thread",
     "ray_depths",
     "surface_check",
     "verify",
@@ -187,17 +190,40 @@ def icp_refine(
     src = to_o3d(cluster)
     T = geometry.invert(T_world_part)  # ICP moves the cluster into the part frame
     passes = [d for d, on in ((s.icp_coarse_distance, coarse), (s.icp_fine_distance, fine)) if on]
-    for dist in passes:
-        res = reg.registration_icp(
-            src,
-            model.pcd,
-            dist,
-            T,
-            reg.TransformationEstimationPointToPlane(),
-            reg.ICPConvergenceCriteria(relative_fitness=1e-7, relative_rmse=1e-7, max_iteration=s.icp_iterations),
-        )
-        T = np.asarray(res.transformation)
+    with one_thread():
+        for dist in passes:
+            res = reg.registration_icp(
+                src,
+                model.pcd,
+                dist,
+                T,
+                reg.TransformationEstimationPointToPlane(),
+                reg.ICPConvergenceCriteria(relative_fitness=1e-7, relative_rmse=1e-7, max_iteration=s.icp_iterations),
+            )
+            T = np.asarray(res.transformation)
     return geometry.invert(T)
+
+
+@contextmanager
+def one_thread() -> Iterator[None]:
+    """Open3D on one thread inside the block (the previous limit is restored after).
+
+    Open3D (0.20, oneAPI TBB) sums ICP's normal equations over threads in the order the scheduler
+    runs them, so the same input gave poses a few ULPs apart from one run to the next; through
+    the corrector, the regrasp graph and T-RRT those ULPs grew into another plan. On one thread the
+    sum has one order. The demo's clusters are a few thousand points: the cost is not measurable.
+    Older Open3D (OpenMP) has no such call: there ``OMP_NUM_THREADS=1`` does it.
+    """
+    limit = getattr(o3d.utility, "set_max_threads", None)
+    if limit is None:
+        yield
+        return
+    before = o3d.utility.get_max_threads()
+    limit(1)
+    try:
+        yield
+    finally:
+        limit(before)
 
 
 def verify(
