@@ -97,8 +97,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
     cfg = setup.cfg
     out = Path(args.out)
     # The run writes into a staging folder; the results replace out's only once it has ended (nothing mixed).
-    with run_folder(out, cfg.name, force=args.force) as stage:
-        report = run_pipeline(cfg, stage, pm=args.plugin_manager)
+    try:
+        with run_folder(out, cfg.name, force=args.force) as stage:
+            report = run_pipeline(cfg, stage, pm=args.plugin_manager)
+    except KeyboardInterrupt:
+        print(f"asmteach: interrupted; {out} is as it was before this run (its partial results were dropped)",
+              file=sys.stderr)
+        return 130
     try:
         from asmteach.core.report_html import format_summary
 

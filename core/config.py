@@ -20,6 +20,7 @@ from asmteach.core.io import read_yaml
 from asmteach.core.models import StrictModel, resolve_relative
 
 __all__ = [
+    "MAX_SEED",
     "PluginChoice",
     "RunConfig",
     "TableSettings",
@@ -58,11 +59,15 @@ class TableSettings(StrictModel):
     size: tuple[Extent, Extent] | None = Field(None, description="table extent along x, y; default: the robot's own")
 
 
+MAX_SEED = 2**31 - 1
+"""Largest seed: libraries seeded from it (Open3D's RANSAC) take a signed 32-bit integer."""
+
+
 class RunConfig(StrictModel):
     """Top-level config of ``asmteach run`` / ``validate``."""
 
     name: str = "run"
-    seed: int = Field(0, ge=0, description="every random choice of the run flows from it")
+    seed: int = Field(0, ge=0, le=MAX_SEED, description="every random choice of the run flows from it")
     structure: str = Field(description="assembly structure YAML (parts A and B, T_A_B, v_a)")
     camera: str | None = Field(None, description="RGB camera intrinsics YAML; default: a C615-like webcam")
     table: TableSettings = Field(default_factory=TableSettings)

@@ -108,7 +108,8 @@ def prepare_run(cfg: RunConfig) -> RunSetup:
 
     structure = cfg.path(cfg.structure)
     if not structure.is_file():
-        raise UserError(f"structure: no such file {structure} (relative to the config's folder)")
+        what = "not a file" if structure.exists() else "no such file"
+        raise UserError(f"structure: {what} {structure} (relative to the config's folder); give a structure YAML")
     task = load_structure(structure)
     parts = []
     for key, spec in (("part_a", task.part_a), ("part_b", task.part_b)):
@@ -120,7 +121,8 @@ def prepare_run(cfg: RunConfig) -> RunSetup:
 
     camera_file = cfg.path(cfg.camera) if cfg.camera else None
     if camera_file is not None and not camera_file.is_file():
-        raise UserError(f"camera: no such file {camera_file} (relative to the config's folder)")
+        what = "not a file" if camera_file.exists() else "no such file"
+        raise UserError(f"camera: {what} {camera_file} (relative to the config's folder); give a camera YAML")
     demo = _check_teacher(cfg, task, camera_file)
 
     center, size = _hand_table_to_robot(cfg)

@@ -50,7 +50,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from pydantic import Field, ValidationError, field_validator
 
-from asmteach.core.config import format_validation_error, set_dotted
+from asmteach.core.config import MAX_SEED, format_validation_error, set_dotted
 from asmteach.core.errors import UserError
 from asmteach.core.io import (
     append_jsonl,
@@ -140,9 +140,11 @@ class ExperimentFile(StrictModel):
         # seeds: 0 would plan no trial at all, a negative seed fails in the middle of a trial
         if isinstance(v, int) and v < 1:
             raise ValueError("give a number of seeds >= 1, or a list of seeds")
+        if isinstance(v, int) and v > MAX_SEED:
+            raise ValueError(f"give at most {MAX_SEED} seeds")
         if isinstance(v, list):
-            if not v or any(s < 0 for s in v):
-                raise ValueError("give a non-empty list of seeds, each >= 0")
+            if not v or any(s < 0 or s > MAX_SEED for s in v):
+                raise ValueError(f"give a non-empty list of seeds, each 0 to {MAX_SEED}")
             if len(set(v)) != len(v):
                 raise ValueError("a seed is listed twice; each (grid point, seed) is one trial")
         return v

@@ -195,6 +195,11 @@ CASES: list[Case] = [
          lambda t: _val(write(t, "c.yaml", f"structur: {STRUCTURE}\n")), 2,
          r"structur.*unknown key|structure.*missing"),
     Case("seed-negative", "seed: -1", lambda t: _val(config(t, seed=-1)), 2, r"seed.*greater than or equal"),
+    Case("seed-huge", "seed: 99999999999 (Open3D takes 32 bits)", lambda t: _val(config(t), "--set",
+                                                                             "seed=99999999999"), 2,
+         r"seed: Input should be less than or equal to 2147483647"),
+    Case("camera-device", "camera: /dev/null", lambda t: _val(config(t, camera="/dev/null")), 2,
+         r"camera: not a file /dev/null"),
     Case("seed-nan", "seed: .nan", lambda t: _val(config(t, seed=NAN)), 2, r"seed: not a finite number"),
     Case("structure-missing", "structure names no file", lambda t: _val(config(t, structure="nope.yaml")), 2,
          r"structure: no such file"),
@@ -316,6 +321,8 @@ CASES: list[Case] = [
          fault=lambda t, mp: _other_run(t / "out")),
     Case("run-out-foreign", "run --out holding files that are no run's", lambda t: _run(t, config(t)), 2,
          r"not a run's results.*--force", fault=lambda t, mp: write(t, "out/thesis.tex", "x") and None),
+    Case("run-interrupted", "run interrupted (Ctrl-C) into a folder of the same run's older results", lambda t: _run(
+        t, config(t)), 130, r"interrupted; .*out is as it was", fault=lambda t, mp: _interrupted_run(t, mp)),
     Case("run-bad-input-first", "run with a bad structure writes nothing",
          lambda t: _run(t, config(t, edit_structure=_no_markers)), 2, r"no markers"),
     # --- placements
@@ -424,6 +431,10 @@ CASES: list[Case] = [
     Case("render-demo-out-readonly", "render-demo --out a read-only folder",
          lambda t: ["render-demo", str(config(t)), "--out", str(t / "ro")], 2, r"cannot write",
          fault=lambda t, mp: readonly(t / "ro", mp)),
+    Case("placements-structure-mesh", "placements of a structure whose inline mesh is relative to it (cwd "
+         "elsewhere): accepted, as in run", lambda t: ["placements", str(structure(
+             t, lambda d: inline_mesh_part(d, "m/" + box_stl(_mk(t / "m")).name))), "--out", str(t / "p.json"),
+             "--no-sheet"], 0, ""),
     Case("placements-com-inside", "placements --com inside the part (needed rtree before): accepted",
          lambda t: ["placements", str(box_stl(t)), "--out", str(t / "p.json"), "--com", "0", "0", "0.002",
                     "--no-sheet"], 0, ""),
@@ -456,6 +467,19 @@ def _part_file(tmp: Path) -> str:
 def _other_run(out: Path) -> None:
     write(out, "report.json", '{"config": {"name": "other"}}')
     write(out, "task.json", "{}")
+
+
+def _interrupted_run(tmp: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--out`` holds an older result of the same config; the run writes a file, then Ctrl-C comes."""
+    from asmteach.core import pipeline
+
+    write(tmp, "out/report.json", '{"config": {"name": "bad"}, "old": true}')
+
+    def run(cfg, out, pm=None):
+        write(Path(out), "report.json", "{}")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pipeline, "run_pipeline", run)
 
 
 def _full_disk_on_json(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -507,6 +531,9 @@ def test_bad_input_gives_one_line_and_the_right_exit_code(case: Case, tmp_path: 
     others = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith(("asmteach:", "WARNING", "pybullet"))]
     assert not others, err  # nothing but the one line (and log warnings)
     assert re.search(case.says, lines[0], re.IGNORECASE), lines[0]
+    if case.id == "run-interrupted":
+        assert sorted(p.name for p in (work / "out").iterdir()) == ["report.json"]
+        assert '"old"' in (work / "out" / "report.json").read_text()
 
 
 def test_the_table_covers_at_least_sixty_cases() -> None:
