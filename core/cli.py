@@ -111,6 +111,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except ImportError:
         print(f"{cfg.name}: {'success' if report.success else 'failed at ' + str(report.failed_stage)}")
     print(f"report: {out / 'report.html'}")
+    if not report.success:
+        why = " ".join(str(report.reason or "the parts did not end assembled").split())
+        print(f"asmteach: {cfg.name} failed at {report.failed_stage}: {why[:300]} (report: {out / 'report.html'})",
+              file=sys.stderr)
     return 0 if report.success else 1
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import itertools
 import time
+import traceback
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -175,11 +176,16 @@ class _Run:
         t0 = time.perf_counter()
         try:
             yield details
-        except (StageFailed, UserError, NotImplementedError) as exc:  # a plugin without an optional method too
+        except Exception as exc:  # noqa: BLE001 - any failure of a stage ends the run as a recorded result
             seconds = time.perf_counter() - t0
-            reason = exc.reason if isinstance(exc, StageFailed) else str(exc)
             if isinstance(exc, StageFailed):
+                reason = exc.reason
                 details.update(exc.details)
+            elif isinstance(exc, UserError | NotImplementedError):  # bad input; a plugin without an optional method
+                reason = str(exc)
+            else:  # a bug or an unforeseen input: the report still says where and why, with the traceback
+                reason = f"internal error ({type(exc).__name__}: {exc})"
+                details["traceback"] = traceback.format_exc(limit=12)
             self.report.stages.append(StageOutcome(stage=name, ok=False, seconds=round(seconds, 3), reason=reason,
                                                    details=to_jsonable(details)))
             self.report.failed_stage, self.report.reason = name, reason

@@ -118,6 +118,7 @@ def prepare_run(cfg: RunConfig) -> RunSetup:
         except UserError as exc:
             raise UserError(f"{structure.name}: {key} ({spec.name}): {exc}") from None
     part_a, part_b = parts
+    _check_contact(task, part_a, part_b, structure)
 
     camera_file = cfg.path(cfg.camera) if cfg.camera else None
     if camera_file is not None and not camera_file.is_file():
@@ -145,6 +146,23 @@ def _check_teacher(cfg: RunConfig, task: AssemblyTask, camera_file: Path | None)
     if check is None or getattr(cls, "demonstrate", Teacher.demonstrate) is Teacher.demonstrate:
         return None
     return check(task, cfg.demo, camera_file)
+
+
+CONTACT_GAP_M = 0.01
+"""Largest gap (metres) between A's and B's bounding boxes when assembled: an assembled B touches A."""
+
+
+def _check_contact(task: AssemblyTask, a: PartModel, b: PartModel, structure: Path) -> None:
+    """``T_A_B`` must put B against A (their boxes within :data:`CONTACT_GAP_M`); far apart is a unit slip
+    (millimetres written as metres) or a wrong frame, and the demonstration would not show both parts."""
+    va = np.asarray(a.mesh.vertices, float)
+    T = np.asarray(task.T_A_B, float)
+    vb = np.asarray(b.mesh.vertices, float) @ T[:3, :3].T + T[:3, 3]
+    gap = np.maximum(0.0, np.maximum(va.min(axis=0) - vb.max(axis=0), vb.min(axis=0) - va.max(axis=0)))
+    dist = float(np.linalg.norm(gap))
+    if dist > CONTACT_GAP_M:
+        raise UserError(f"{structure.name}: T_A_B puts {b.name} {1000 * dist:.0f} mm away from {a.name}; assembled, "
+                        "B touches A (T_A_B is B's pose in A's frame in metres: millimetres written as metres?)")
 
 
 def _check_scene(ex: ExecutionSettings) -> None:

@@ -50,7 +50,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 from pydantic import Field, ValidationError, field_validator
 
-from asmteach.core.config import MAX_SEED, format_validation_error, set_dotted
+from asmteach.core.config import MAX_SEED, check_finite, format_validation_error, set_dotted
 from asmteach.core.errors import UserError
 from asmteach.core.io import (
     append_jsonl,
@@ -185,6 +185,7 @@ def load_experiment(path: str | Path) -> tuple[ExperimentFile, type[Experiment]]
     raw = read_yaml(p)
     if not isinstance(raw, dict):
         raise UserError(f"{p}: an experiment file must be a YAML mapping")
+    check_finite(raw, str(p))  # a NaN passes every bound of a Params model
     try:
         exp = ExperimentFile.model_validate(raw)
     except ValidationError as exc:

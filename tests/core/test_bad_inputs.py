@@ -256,6 +256,9 @@ CASES: list[Case] = [
     # --- the structure and its parts
     Case("T_A_B-nan", "T_A_B with NaN", lambda t: _val(config(t, edit_structure=_set("T_A_B.xyz.0", NAN))), 2,
          r"T_A_B\.xyz\[0\]: not a finite number"),
+    Case("T_A_B-mm", "T_A_B written in millimetres (B 15 m above A)",
+         lambda t: _val(config(t, edit_structure=_set("T_A_B.xyz", [0, 0, 15]))), 2,
+         r"T_A_B puts round_peg 14\d\d\d mm away from holed_block.*millimetres written as metres"),
     Case("v_a-zero", "v_a = [0, 0, 0]", lambda t: _val(config(t, edit_structure=_set("v_a", [0, 0, 0]))), 2,
          r"v_a.*non-zero"),
     Case("no-markers", "part B without markers (render would crash)",
@@ -438,6 +441,12 @@ CASES: list[Case] = [
     Case("placements-com-inside", "placements --com inside the part (needed rtree before): accepted",
          lambda t: ["placements", str(box_stl(t)), "--out", str(t / "p.json"), "--com", "0", "0", "0.002",
                     "--no-sheet"], 0, ""),
+    Case("sweep-params-nan", "sweep params with NaN", lambda t: ["sweep", str(experiment(
+        t, "experiment: toy_square\nparams: {x: .nan}\n")), "--out", str(t / "o")], 2,
+         r"params\.x: not a finite number", needs=("toy_dist",)),
+    Case("run-stage-crash", "a stage raising an unforeseen error (the renderer's ValueError)",
+         lambda t: _run(t, config(t)), 1, r"bad failed at teach: internal error \(ValueError: no viewing direction",
+         fault=lambda t, mp: _crashing_renderer(mp)),
     Case("sweep-binary", "sweep file is binary", lambda t: ["sweep", str(write(t, "e.yaml", b"\x00PK")), "--out",
                                                             str(t / "o")], 2, r"binary"),
     Case("sweep-full-disk", "a full disk while the sweep logs its trials (ENOSPC)",
@@ -480,6 +489,15 @@ def _interrupted_run(tmp: Path, monkeypatch: pytest.MonkeyPatch) -> None:
         raise KeyboardInterrupt
 
     monkeypatch.setattr(pipeline, "run_pipeline", run)
+
+
+def _crashing_renderer(monkeypatch: pytest.MonkeyPatch) -> None:
+    from asmteach.plugins.detectors.aruco.teacher import ArucoTeacher
+
+    def demonstrate(self, task, demo, camera_file=None, out_dir=None):
+        raise ValueError("no viewing direction shows markers of both parts")
+
+    monkeypatch.setattr(ArucoTeacher, "demonstrate", demonstrate)
 
 
 def _full_disk_on_json(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -529,8 +547,12 @@ def test_bad_input_gives_one_line_and_the_right_exit_code(case: Case, tmp_path: 
         return
     assert len(lines) == 1, err
     others = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith(("asmteach:", "WARNING", "pybullet"))]
-    assert not others, err  # nothing but the one line (and log warnings)
+    if not (argv[0] == "run" and code == 1):  # a run that started shows its progress display on stderr too
+        assert not others, err  # nothing but the one line (and log warnings)
     assert re.search(case.says, lines[0], re.IGNORECASE), lines[0]
+    if case.id == "run-stage-crash":  # the run still wrote its report, with the traceback
+        report = json.loads((work / "out" / "report.json").read_text())
+        assert report["failed_stage"] == "teach" and "ValueError" in report["stages"][0]["details"]["traceback"]
     if case.id == "run-interrupted":
         assert sorted(p.name for p in (work / "out").iterdir()) == ["report.json"]
         assert '"old"' in (work / "out" / "report.json").read_text()
