@@ -27,7 +27,7 @@ from asmteach.core import geometry, registry
 from asmteach.core.config import ROLE_OF_KEY, RunConfig, format_validation_error, validate_settings
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import AssemblyProblem, PartModel, Robot
-from asmteach.core.io import to_jsonable, write_json, write_model
+from asmteach.core.io import describe_os_error, to_jsonable, write_json, write_model
 from asmteach.core.models import AssemblyTask, Detection, Plan, RunReport, StageOutcome, StrictModel, TablePlane
 from asmteach.core.scene import SceneSettings, random_start_poses
 from asmteach.core.symmetry import part_symmetries
@@ -183,6 +183,8 @@ class _Run:
                 details.update(exc.details)
             elif isinstance(exc, UserError | NotImplementedError):  # bad input; a plugin without an optional method
                 reason = str(exc)
+            elif isinstance(exc, OSError):  # the file system failed (a full disk): the task failed, no bug
+                reason = describe_os_error(exc)
             else:  # a bug or an unforeseen input: the report still says where and why, with the traceback
                 reason = f"internal error ({type(exc).__name__}: {exc})"
                 details["traceback"] = traceback.format_exc(limit=12)

@@ -447,6 +447,10 @@ CASES: list[Case] = [
     Case("run-stage-crash", "a stage raising an unforeseen error (the renderer's ValueError)",
          lambda t: _run(t, config(t)), 1, r"bad failed at teach: internal error \(ValueError: no viewing direction",
          fault=lambda t, mp: _crashing_renderer(mp)),
+    Case("run-disk-full-in-stage", "a full disk while the run writes its demonstration frames (ENOSPC)",
+         lambda t: _run(t, config(t)), 1, r"failed at teach: .*frame_0000\.jpg: No space left on device; free some",
+         fault=lambda t, mp: _crashing_renderer(mp, OSError(errno.ENOSPC, "No space left on device",
+                                                             "demonstration/frame_0000.jpg"))),
     Case("sweep-binary", "sweep file is binary", lambda t: ["sweep", str(write(t, "e.yaml", b"\x00PK")), "--out",
                                                             str(t / "o")], 2, r"binary"),
     Case("sweep-full-disk", "a full disk while the sweep logs its trials (ENOSPC)",
@@ -491,11 +495,12 @@ def _interrupted_run(tmp: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(pipeline, "run_pipeline", run)
 
 
-def _crashing_renderer(monkeypatch: pytest.MonkeyPatch) -> None:
+def _crashing_renderer(monkeypatch: pytest.MonkeyPatch, error: Exception | None = None) -> None:
+    """The teacher's renderer raises ``error`` (default: the ValueError it raised for a part without markers)."""
     from asmteach.plugins.detectors.aruco.teacher import ArucoTeacher
 
     def demonstrate(self, task, demo, camera_file=None, out_dir=None):
-        raise ValueError("no viewing direction shows markers of both parts")
+        raise error or ValueError("no viewing direction shows markers of both parts")
 
     monkeypatch.setattr(ArucoTeacher, "demonstrate", demonstrate)
 
