@@ -203,10 +203,17 @@ def _fit_table(points: np.ndarray, s: SegmentSettings, seed: int) -> tuple[Table
             f"no table plane: the largest plane is tilted {tilt:.0f} deg from horizontal; "
             "give the cloud in the world frame with z up"
         )
-    # Least-squares refinement on (a stride sample of) the full-resolution inliers.
+    # Least-squares refinement on (a stride sample of) the full-resolution inliers, repeated until the
+    # inliers stop changing: Open3D's RANSAC is not repeatable even seeded (its threads draw in any order),
+    # and the fixed point makes the plane a function of the points, not of the RANSAC draw.
     sample = points[:: max(1, len(points) // 50000)]
-    near = sample[np.abs(sample @ normal + d) < s.plane_distance]
-    if len(near) >= 3:
+    chosen = None
+    for _ in range(10):
+        mask = np.abs(sample @ normal + d) < s.plane_distance
+        if mask.sum() < 3 or (chosen is not None and np.array_equal(mask, chosen)):
+            break
+        chosen = mask
+        near = sample[mask]
         c = near.mean(axis=0)
         q = near - c
         _, vecs = np.linalg.eigh(q.T @ q)  # smallest-eigenvalue eigenvector = plane normal
