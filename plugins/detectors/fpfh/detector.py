@@ -32,6 +32,7 @@ from asmteach.plugins.detectors.cvfh.refine import (
     Verdict,
     icp_refine,
     model_cloud,
+    one_thread,
     verify,
 )
 from asmteach.plugins.detectors.cvfh.segment import (
@@ -162,18 +163,24 @@ class FpfhRansacDetector(Detector):
             for attempt in range(s.attempts):
                 o3d.utility.random.seed(int(self.seed * 7919 + ci * 101 + attempt))
                 dist = 1.5 * s.voxel
-                res = reg.registration_ransac_based_on_feature_matching(
-                    src,
-                    prep.down,
-                    feats,
-                    prep.features,
-                    s.mutual_filter,
-                    dist,
-                    reg.TransformationEstimationPointToPoint(False),
-                    3,
-                    [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
-                    reg.RANSACConvergenceCriteria(s.ransac_iterations, s.ransac_confidence),
-                )
+                # On one thread: on parallel threads which hypothesis won depended on the scheduler (the
+                # milk scan, one seed, three processes at once: 0.13 or 0.92 mm off).
+                with one_thread():
+                    res = reg.registration_ransac_based_on_feature_matching(
+                        src,
+                        prep.down,
+                        feats,
+                        prep.features,
+                        s.mutual_filter,
+                        dist,
+                        reg.TransformationEstimationPointToPoint(False),
+                        3,
+                        [
+                            reg.CorrespondenceCheckerBasedOnEdgeLength(0.9),
+                            reg.CorrespondenceCheckerBasedOnDistance(dist),
+                        ],
+                        reg.RANSACConvergenceCriteria(s.ransac_iterations, s.ransac_confidence),
+                    )
                 clock.lap("matching")
                 T0 = geometry.invert(np.asarray(res.transformation))
                 T = icp_refine(np.asarray(src.points), prep.model, T0, s.refine)
