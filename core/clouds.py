@@ -698,7 +698,7 @@ def table_frame(
     for _ in range(3):
         if len(work.points) < 50:
             break
-        model, inl = work.segment_plane(dist, 3, 500)
+        model, inl = _plane_one_thread(o3d, work, dist)
         n = np.asarray(model[:3], dtype=float)
         d = -float(model[3])
         s = float(np.linalg.norm(n))
@@ -751,6 +751,20 @@ def table_frame(
     T_cam_world[:3, 0], T_cam_world[:3, 1], T_cam_world[:3, 2], T_cam_world[:3, 3] = x_w, y_w, z_w, origin
     tilt = float(np.degrees(np.arcsin(np.clip(-(optical @ z_w), -1.0, 1.0))))
     return TableFrame(geometry.invert(T_cam_world), n, d, frac, cam_h, tilt, table_height)
+
+
+def _plane_one_thread(o3d: Any, pc: Any, dist: float) -> tuple[Any, list[int]]:
+    """Open3D's RANSAC plane (500 iterations) on one thread: run in parallel, one seed need not give one
+    plane (as Open3D's ICP and feature RANSAC did not give one pose; not traced in Open3D's source)."""
+    limit = getattr(o3d.utility, "set_max_threads", None)
+    if limit is None:
+        return pc.segment_plane(dist, 3, 500)
+    before = o3d.utility.get_max_threads()
+    limit(1)
+    try:
+        return pc.segment_plane(dist, 3, 500)
+    finally:
+        limit(before)
 
 
 @dataclass
