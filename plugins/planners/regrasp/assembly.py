@@ -116,8 +116,18 @@ class AssemblySettings(StrictModel):
     cartesian_step: float = Field(0.004, gt=0.0, description="TCP step of straight-line motions")
     regrasp_penalty: float = Field(10.0, ge=0.0, description="graph weight of one regrasp")
     motion_weight: float = Field(1.0, ge=0.0, description="graph weight per radian of joint motion")
-    motion_time_limit: float = Field(5.0, gt=0.0, description="per motion query")
-    time_budget: float = Field(60.0, gt=0.0, description="per part; re-searches stop after it")
+    motion_time_limit: float = Field(
+        5.0, gt=0.0,
+        description="seconds per motion query: a wall-clock safety cap (the planner's iteration limit is the "
+        "budget); a query it cuts is listed in the part's stats under wall_clock_cuts")
+    max_attempts: int = Field(
+        40, ge=1,
+        description="per part: keyframe sequences tried (each after the last one's motion failed) before giving "
+        "up; counted, so the same seed gives the same plan however loaded the machine is")
+    time_budget: float = Field(
+        600.0, gt=0.0,
+        description="seconds per part: a wall-clock safety cap on the re-searches after max_attempts; when it "
+        "cuts the search, the reason and wall_clock_cuts say so")
     acceleration: float = Field(2.0, gt=0.0, description="joint acceleration limit of the timed paths, rad/s^2")
 
 
@@ -162,11 +172,12 @@ class TransferResult:
 class _MotionFailure(Exception):
     """A keyframe motion failed; ``edge`` is the graph edge to ban, ``node`` a node whose every edge is banned."""
 
-    def __init__(self, edge: tuple[Any, Any], reason: str, node: Any | None = None) -> None:
+    def __init__(self, edge: tuple[Any, Any], reason: str, node: Any | None = None, timed_out: bool = False) -> None:
         super().__init__(reason)
         self.edge = edge
         self.reason = reason
         self.node = node
+        self.timed_out = timed_out  # a wall-clock limit, not the search, ended it: the result depends on the load
 
 
 def placement_slots(
@@ -377,6 +388,9 @@ def plan_transfer(
     stats["graph_seconds"] = time.perf_counter() - t0
     stats["search_seconds"] = 0.0
     stats["motion_seconds"] = 0.0
+    # Every wall-clock limit that changed the outcome (a motion query cut at motion_time_limit, the part's
+    # time_budget): with none, the plan is a function of the seed alone; with some, of the machine's load too.
+    stats["wall_clock_cuts"] = []
     attempts = 0
     while True:
         ts = time.perf_counter()
@@ -449,13 +463,21 @@ def plan_transfer(
             if fail.node is not None and fail.node in G:
                 banned += list(G.edges(fail.node))
             last_reason = fail.reason
+            if fail.timed_out:
+                stats["wall_clock_cuts"].append(fail.reason)
             if progress:
                 progress(f"{part.name}: {fail.reason}; searching again")
-            if time.perf_counter() - t0 > settings.time_budget:
+            if attempts >= settings.max_attempts:
                 return TransferResult(
                     False, search=search, graph=G, stats=_rounded(stats),
-                    reason=f"time budget of {settings.time_budget:.0f} s spent after {attempts} keyframe "
-                    f"sequences; last failure: {last_reason}",
+                    reason=f"{attempts} keyframe sequences tried (max_attempts); last failure: {last_reason}",
+                )
+            if time.perf_counter() - t0 > settings.time_budget:
+                stats["wall_clock_cuts"].append(f"time budget of {settings.time_budget:.0f} s")
+                return TransferResult(
+                    False, search=search, graph=G, stats=_rounded(stats),
+                    reason=f"time budget of {settings.time_budget:.0f} s (wall clock) spent after {attempts} "
+                    f"keyframe sequences; last failure: {last_reason}",
                 )
             continue
         stats["motion_seconds"] += time.perf_counter() - tm
@@ -738,7 +760,8 @@ def _free(
         # The goal configuration itself is in collision (a held part against the robot, say): no motion
         # to it can succeed, whatever edge leads there.
         bad_goal = edge[1] if str(res.reason).startswith(FailureKind.GOAL_INVALID.value) else None
-        raise _MotionFailure(edge, f"{what}: {res.reason}", node=bad_goal)
+        raise _MotionFailure(edge, f"{what}: {res.reason}", node=bad_goal,
+                             timed_out=res.stats.get("failure") == FailureKind.TIMEOUT)
     path = np.asarray(res.path, float)
     # clearance of the free motion in the world it was planned in, every 0.05 rad (for the statistics)
     clearances.append(float(np.min(robot.clearance(arm, densify(path, 0.05)))))

@@ -183,3 +183,27 @@ def test_relocated_slots_move_every_slot_or_none(peg) -> None:
         np.testing.assert_allclose(m.T_world_part[:3, :3], s.T_world_part[:3, :3])
         np.testing.assert_allclose(m.T_world_part[:3, 3] - s.T_world_part[:3, 3], [0.05, -0.15, 0.0], atol=1e-12)
     assert relocated_slots(slots, START_XY, (0.30, 0.35), peg, far, clearance=0.03) == []  # within 3 cm of the box
+
+
+class TimesOut:
+    """Motion planner double: every query cut by its wall-clock limit."""
+
+    def plan(self, start: np.ndarray, goal: np.ndarray, **_: object) -> MotionResult:
+        from asmteach.plugins.planners.motion.query import FailureKind, failure
+
+        return failure(FailureKind.TIMEOUT, "after 5.0 s")
+
+
+def test_re_searches_are_counted_and_wall_clock_cuts_reported(peg) -> None:
+    """The search gives up after max_attempts keyframe sequences (a count, not the machine's speed), and
+    every motion a wall-clock limit cut is listed: the plan then depends on the load, and says so."""
+    T_start = geometry.from_rotation(LYING, [*START_XY, 0.01])
+    robot = EdgeOfReachArm()
+    res = plan_transfer(robot, TimesOut(), peg, GRASPS, T_start=T_start,
+                        goal=PlaceGoal(PoseSlot("goal", "goal", geometry.from_rotation(LYING, [*GOAL_XY, 0.01])),
+                                       np.array([0.0, 0.0, 0.05]), on_table=False),
+                        middle_slots=lambda every: [], world=[], q_now={"left": robot.home("left")},
+                        settings=AssemblySettings(placement_yaws=2, max_attempts=1))
+    assert not res.success
+    assert "1 keyframe sequences tried (max_attempts)" in (res.reason or "")
+    assert res.stats["wall_clock_cuts"] == ["motion to the pre-grasp at start: timeout after 5.0 s"]
