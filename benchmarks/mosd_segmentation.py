@@ -103,8 +103,8 @@ def run_scene(path: Path, setting: str, seed: int = 0) -> Result:
 def picture(res: Result, out: Path) -> None:
     """Truth beside ours as label images; a segment takes the colour of the object it matches best.
 
-    White: no return; light grey: table (truth) or no segment (ours); black: truth-table points inside a
-    segment; dark grey: a segment that is no object's best match.
+    White: no return; light grey: table (truth) or no segment (ours); black, circled: truth-table points
+    inside a segment; dark grey: a segment that is no object's best match.
     """
     import matplotlib
 
@@ -138,10 +138,14 @@ def picture(res: Result, out: Path) -> None:
         f"{res.scene}: truth ({len(s.objects)} objects)",
         f"ours: median IoU {s.median_iou:.2f}, table left {s.table_points_left}",
     )
+    left = ok & (res.ours > 0) & (res.truth == 0)
+    lr, lc = np.divmod(res.pixels[left], W)
     for ax, img, title in zip(axes, images, titles, strict=True):
         ax.imshow(img, interpolation="nearest")
         ax.set_title(title, fontsize=8)
         ax.axis("off")
+    # Table points left in a segment, circled: one pixel each would vanish at this size.
+    axes[1].scatter(lc / 2, lr / 2, s=30, facecolors="none", edgecolors="black", linewidths=0.8)
     fig.tight_layout(pad=0.6)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=100)
