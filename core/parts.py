@@ -182,10 +182,21 @@ def build_cloud_part(spec: PartSpec, path: Path) -> PartModel:
                      points=pts, scan_viewpoint=eye)
 
 
-def build_part(spec: PartSpec, base_dir: Path | None = None) -> PartModel:
-    """Mesh, mass and centre of mass of a part spec (a ``mesh`` that is a point cloud: :func:`build_cloud_part`)."""
+def build_part(spec: PartSpec, base_dir: Path | None = None, *, scans: bool = False) -> PartModel:
+    """Mesh, mass and centre of mass of a part spec.
+
+    A ``mesh`` that is a point cloud is a part given as a scan (:func:`build_cloud_part`): taken only with
+    ``scans`` (``asmteach detect``); everything else (placements, grasps, planning) needs a closed mesh and
+    gets a one-line :class:`UserError` saying so.
+    """
     if spec.mesh is not None and is_cloud_file(resolve_relative(spec.mesh, base_dir or Path.cwd())):
-        return build_cloud_part(spec, resolve_relative(spec.mesh, base_dir or Path.cwd()))
+        path = resolve_relative(spec.mesh, base_dir or Path.cwd())
+        if not scans:
+            raise UserError(
+                f"part {spec.name!r}: {path.name} is a point cloud (a scan); only `asmteach detect` takes a part "
+                "given as a scan (placements, grasps and planning need a closed mesh): give the part's mesh"
+            )
+        return build_cloud_part(spec, path)
     if spec.solid is not None:
         mesh = build_solid(spec.solid)
     else:
@@ -253,12 +264,14 @@ def load_parts(
     units: str = "m",
     select: str | None = None,
     center_of_mass: np.ndarray | None = None,
+    scans: bool = False,
 ) -> list[PartModel]:
     """Parts named on a command line: a mesh file, a part YAML or a structure YAML.
 
     A structure gives its two parts, or only ``select`` (``"a"``, ``"b"`` or a
     part name). ``units`` applies to mesh files; ``center_of_mass`` (part
-    frame, metres) overrides the solid's, for a single part only.
+    frame, metres) overrides the solid's, for a single part only. ``scans``
+    lets a point cloud stand for a part (:func:`build_part`).
     """
     path = Path(source)
     if not path.is_file():
@@ -269,7 +282,7 @@ def load_parts(
             spec = PartSpec(name=path.stem, mesh=str(path.resolve()), mesh_units=units, center_of_mass=center_of_mass)
         except ValidationError as exc:
             raise UserError(f"--com: {format_validation_error(exc)}") from None
-        return [build_part(spec)]
+        return [build_part(spec, scans=scans)]
     if suffix not in (".yaml", ".yml"):
         raise UserError(
             f"{path}: not a mesh ({', '.join(sorted(MESH_SUFFIXES))}), a point cloud (.pcd, .xyz) nor a part/structure "
@@ -287,8 +300,8 @@ def load_parts(
             if not specs:
                 names = f"a ({task.part_a.name}), b ({task.part_b.name})"
                 raise UserError(f"{select!r} is not a part of {path.name}; choose one of {names}")
-        return [build_part(s, base) for s in specs.values()]
+        return [build_part(s, base, scans=scans) for s in specs.values()]
     spec = load_part_spec(path)
     if center_of_mass is not None:
         spec = spec.model_copy(update={"center_of_mass": np.asarray(center_of_mass, dtype=float)})
-    return [build_part(spec, base)]
+    return [build_part(spec, base, scans=scans)]

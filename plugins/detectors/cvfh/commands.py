@@ -395,7 +395,7 @@ def _load_source(
     raw = read_yaml(src) if src.suffix.lower() in {".yaml", ".yml"} else None
     if isinstance(raw, dict) and "structure" in raw:
         cfg = load_run_config(src)
-        part = load_parts(cfg.path(cfg.structure), select=args.part)[0]
+        part = load_parts(cfg.path(cfg.structure), select=args.part, scans=True)[0]
         det = (cfg.detector.plugin, cfg.detector.settings)
         cor = (cfg.corrector.plugin, cfg.corrector.settings) if cfg.corrector else None
         seed = cfg.seed
@@ -404,7 +404,7 @@ def _load_source(
     elif raw is not None and not isinstance(raw, dict):
         raise UserError(f"{src}: expected a YAML mapping (a part, a structure or a run config)")
     else:
-        part = load_parts(src, units=args.units, select=args.part)[0]
+        part = load_parts(src, units=args.units, select=args.part, scans=True)[0]
     if args.seed is not None:
         seed = args.seed
     return part, det, cor, seed, table, eye

@@ -28,7 +28,7 @@ def _error(T: np.ndarray) -> tuple[float, float]:
 @pytest.fixture(scope="module")
 def milk(real_data: Path) -> tuple[PartModel, clouds.WorldCloud, Path]:
     kinect = real_data / "real/kinect"
-    part = load_parts(kinect / "milk.pcd")[0]
+    part = load_parts(kinect / "milk.pcd", scans=True)[0]
     scene = clouds.read_cloud(kinect / "milk_cartoon_all_small_clorox.pcd")
     # The scene is in the Kinect's frame and has no table truth: the table plane found in it gives the world.
     return part, clouds.to_world(scene, seed=0), kinect
@@ -111,26 +111,28 @@ def test_scan_as_a_part_file(tmp_path: Path) -> None:
     pts = trimesh.sample.sample_surface(box, 3000, seed=0)[0] + np.array([0.0, 0.0, 0.8])
     clouds.write_pcd(tmp_path / "scan.pcd", pts)
     (tmp_path / "part.yaml").write_text("name: boxscan\nmesh: scan.pcd\n")
-    part = load_parts(tmp_path / "part.yaml")[0]
+    from asmteach.core.errors import UserError
+
+    with pytest.raises(UserError, match="only `asmteach detect` takes a part given as a scan"):
+        load_parts(tmp_path / "part.yaml")  # placements, grasps, planning: a closed mesh is needed
+    part = load_parts(tmp_path / "part.yaml", scans=True)[0]
     assert part.name == "boxscan" and part.points is not None and len(part.points) == 3000
     assert np.allclose(part.mesh.extents, (0.06, 0.04, 0.03), atol=1e-3)
     box.export(tmp_path / "mesh.ply")
-    assert load_parts(tmp_path / "mesh.ply")[0].points is None
+    assert load_parts(tmp_path / "mesh.ply", scans=True)[0].points is None
     from asmteach.plugins.detectors.depth_camera import write_cloud_ply
 
-    assert load_parts(write_cloud_ply(tmp_path / "cloud.ply", pts))[0].points is not None
+    assert load_parts(write_cloud_ply(tmp_path / "cloud.ply", pts), scans=True)[0].points is not None
     # A scan in millimetres given as metres, and a flat one: one line each.
     clouds.write_pcd(tmp_path / "mm.pcd", pts * 1000.0)
-    from asmteach.core.errors import UserError
-
     with pytest.raises(UserError, match="millimetres"):
-        load_parts(tmp_path / "mm.pcd")
-    assert load_parts(tmp_path / "mm.pcd", units="mm")[0].points is not None
+        load_parts(tmp_path / "mm.pcd", scans=True)
+    assert load_parts(tmp_path / "mm.pcd", units="mm", scans=True)[0].points is not None
     flat = pts.copy()
     flat[:, 2] = 0.8
     clouds.write_pcd(tmp_path / "flat.pcd", flat)
     with pytest.raises(UserError, match="flat"):
-        load_parts(tmp_path / "flat.pcd")
+        load_parts(tmp_path / "flat.pcd", scans=True)
 
 
 def test_verify_scan_along_rays(milk: tuple[PartModel, clouds.WorldCloud, Path]) -> None:
