@@ -47,16 +47,19 @@ Extent = Annotated[float, Field(gt=0.0, le=5.0)]
 class TableSettings(StrictModel):
     """The work table in front of the robot (world frame, metres).
 
-    ``center`` and ``size``, when given, are the robot's table: the run loader
-    (:mod:`asmteach.core.run_setup`) hands them to the robot plugin's
-    ``table_center`` / ``table_size`` settings and checks that the parts'
-    start region lies on it. Left out, the robot's own table is used.
+    ``center`` and ``size``, when written in a run config, are the robot's
+    table: the run loader (:mod:`asmteach.core.run_setup`) hands them to the
+    robot plugin's ``table_center`` / ``table_size`` settings and checks that
+    the parts' start region lies on it. Left out (not in ``model_fields_set``),
+    the robot's own table is used; the defaults here are the table of the
+    rendered detection scenes (``cvfh`` plugin), which read them directly.
     """
 
     height: float = Field(0.0, ge=-2.0, le=2.0, description="table top z in the world frame")
-    center: tuple[Coordinate, Coordinate] | None = Field(
-        None, description="table centre x, y; default: the robot plugin's own")
-    size: tuple[Extent, Extent] | None = Field(None, description="table extent along x, y; default: the robot's own")
+    center: tuple[Coordinate, Coordinate] = Field(
+        (0.45, 0.0), description="table centre x, y; in a run config, only when written: the robot's table")
+    size: tuple[Extent, Extent] = Field(
+        (0.8, 1.2), description="table extent along x, y; in a run config, only when written: the robot's table")
 
 
 MAX_SEED = 2**31 - 1

@@ -197,9 +197,10 @@ def _hand_table_to_robot(cfg: RunConfig) -> tuple[tuple[float, float] | None, tu
     cls = registry.get_class("robots", cfg.robot.plugin)
     fields = cls.Settings.model_fields
     settings = copy.deepcopy(cfg.robot.settings)
+    written = cfg.table.model_fields_set  # a default is not a request: the robot keeps its own table then
     given = {"table_center": cfg.table.center, "table_size": cfg.table.size}
     for key, value in given.items():
-        if value is None:
+        if key.removeprefix("table_") not in written:
             continue
         short = key.removeprefix("table_")
         if key not in fields:
