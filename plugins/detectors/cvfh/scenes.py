@@ -67,11 +67,23 @@ def default_camera_pose(table: TableSettings | None = None) -> np.ndarray:
     return look_at(eye, [WORK_CENTER[0], WORK_CENTER[1], h])
 
 
+SCENE_TABLE_CENTER = (0.45, 0.0)
+"""Table centre x, y of a rendered scene (world, metres) when the settings leave it to the robot."""
+SCENE_TABLE_SIZE = (0.8, 1.2)
+"""Table extent along x, y of a rendered scene (metres) when the settings leave it to the robot."""
+
+
 def table_mesh(table: TableSettings | None = None) -> tuple[trimesh.Trimesh, np.ndarray]:
-    """The table as a 2 cm slab and its ``T_world_table`` (top face at ``table.height``)."""
+    """The table as a 2 cm slab and its ``T_world_table`` (top face at ``table.height``).
+
+    ``table.center`` / ``table.size`` left out (``None``: the robot's own table in a run) give the
+    scene's table, :data:`SCENE_TABLE_CENTER` x :data:`SCENE_TABLE_SIZE`.
+    """
     t = table or TableSettings()
-    mesh = trimesh.creation.box(extents=[t.size[0], t.size[1], 0.02])
-    return mesh, geometry.from_rotation(np.eye(3), [t.center[0], t.center[1], t.height - 0.01])
+    cx, cy = t.center if t.center is not None else SCENE_TABLE_CENTER
+    sx, sy = t.size if t.size is not None else SCENE_TABLE_SIZE
+    mesh = trimesh.creation.box(extents=[sx, sy, 0.02])
+    return mesh, geometry.from_rotation(np.eye(3), [cx, cy, t.height - 0.01])
 
 
 def place_on_table(
