@@ -358,6 +358,10 @@ CASES: list[Case] = [
     Case("grasps-hand-passwd", "grasps --hand /etc/passwd (contents never echoed)",
          lambda t: ["grasps", str(box_stl(t)), "--out", str(t / "g.json"), "--hand", "/etc/passwd"], 2,
          r"^(?!.*root:).*(mapping|invalid YAML)"),
+    Case("grasps-hand-nan", "grasps --hand file with a NaN finger size",
+         lambda t: ["grasps", str(box_stl(t)), "--out", str(t / "g.json"), "--hand", str(write(
+             t, "hand.yaml", "name: h\nmax_width: .nan\nfinger_size: [0.01, 0.02, 0.03]\n"))], 2,
+         r"hand\.yaml: max_width: not a finite number"),
     Case("grasps-hand-missing", "grasps --hand names no file",
          lambda t: ["grasps", str(box_stl(t)), "--out", str(t / "g.json"), "--hand", "gripper.yaml"], 2,
          r"neither 'nextage'"),

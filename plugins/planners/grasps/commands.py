@@ -16,7 +16,7 @@ import numpy as np
 import trimesh
 from pydantic import ValidationError
 
-from asmteach.core.config import format_validation_error
+from asmteach.core.config import check_finite, format_validation_error
 from asmteach.core.errors import UserError
 from asmteach.core.hooks import hookimpl
 from asmteach.core.interfaces import PartModel
@@ -43,8 +43,10 @@ def load_hand(spec: str) -> HandSpec:
     path = Path(spec)
     if not path.is_file():
         raise UserError(f"--hand: {spec!r} is neither 'nextage' nor an existing HandSpec YAML/JSON file")
+    raw = read_yaml(path)
+    check_finite(raw, str(path))  # a NaN passes every bound of the hand's geometry
     try:
-        return HandSpec.model_validate(read_yaml(path))
+        return HandSpec.model_validate(raw)
     except ValidationError as exc:
         raise UserError(f"{path}: {format_validation_error(exc)}") from None
 
