@@ -147,8 +147,8 @@ def run_folder(out: str | os.PathLike[str], name: str, *, force: bool = False, m
     then the old ones deleted. An interrupted or crashed run leaves ``out``
     as it was (its staging folder is removed, or, after a kill -9, removed by
     the next run). ``out`` holding another run's results (a ``marker`` file
-    naming another run at ``key``, or files without a marker) is refused
-    unless ``force``; the results of the same run are replaced.
+    naming another run at ``key``) is refused unless ``force``; the results
+    of the same run are replaced; files without a marker are never replaced.
     """
     target = check_out_dir(out)
     for stale in target.glob(".partial-*"):  # left by a run killed with -9
@@ -156,10 +156,13 @@ def run_folder(out: str | os.PathLike[str], name: str, *, force: bool = False, m
             if not _pid_alive(int(stale.name.rsplit("-", 1)[1])):
                 shutil.rmtree(stale, ignore_errors=True)
     owner = _owner(target, marker, key)
+    if owner == "":
+        # Never replaced, not even with --force: they may be anything (--out . in a project folder).
+        raise UserError(f"--out {target}: holds files that are not a run's results (no readable {marker}); give "
+                        "an empty or new folder")
     if owner is not None and owner != name and not force:
-        whose = f"the results of run {owner!r}" if owner else "files that are not a run's results"
-        raise UserError(f"--out {target}: holds {whose}; give an empty or new folder, or add --force to replace "
-                        "them")
+        raise UserError(f"--out {target}: holds the results of run {owner!r}; give an empty or new folder, or add "
+                        "--force to replace them")
     stage = target / f".partial-{os.getpid()}"
     shutil.rmtree(stage, ignore_errors=True)
     stage.mkdir()

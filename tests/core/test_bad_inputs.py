@@ -323,9 +323,13 @@ CASES: list[Case] = [
          lambda t: _run(t, config(t)), 2, r"holds the results of run 'other'.*--force",
          fault=lambda t, mp: _other_run(t / "out")),
     Case("run-out-foreign", "run --out holding files that are no run's", lambda t: _run(t, config(t)), 2,
-         r"not a run's results.*--force", fault=lambda t, mp: write(t, "out/thesis.tex", "x") and None),
+         r"not a run's results \(no readable report\.json\); give an empty or new folder$",
+         fault=lambda t, mp: write(t, "out/thesis.tex", "x") and None),
     Case("run-interrupted", "run interrupted (Ctrl-C) into a folder of the same run's older results", lambda t: _run(
         t, config(t)), 130, r"interrupted; .*out is as it was", fault=lambda t, mp: _interrupted_run(t, mp)),
+    Case("run-out-foreign-force", "run --out . --force in a folder of other files: still refused",
+         lambda t: _run(t, config(t), "--force"), 2, r"not a run's results",
+         fault=lambda t, mp: write(t, "out/thesis.tex", "x") and None),
     Case("run-bad-input-first", "run with a bad structure writes nothing",
          lambda t: _run(t, config(t, edit_structure=_no_markers)), 2, r"no markers"),
     # --- placements
