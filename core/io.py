@@ -151,7 +151,7 @@ def run_folder(out: str | os.PathLike[str], name: str, *, force: bool = False, m
     of the same run are replaced; files without a marker are never replaced.
     """
     target = check_out_dir(out)
-    for stale in target.glob(".partial-*"):  # left by a run killed with -9
+    for stale in [*target.glob(".partial-*"), *target.glob(".replaced-*")]:  # left by a run killed with -9
         with contextlib.suppress(ValueError):
             if not _pid_alive(int(stale.name.rsplit("-", 1)[1])):
                 shutil.rmtree(stale, ignore_errors=True)
