@@ -182,9 +182,12 @@ def _fit_table(points: np.ndarray, s: SegmentSettings, seed: int) -> tuple[Table
     down = to_o3d(points).voxel_down_sample(s.plane_voxel)
     if len(down.points) < 3:
         return None, "no table plane: the cloud collapses to fewer than 3 voxels"
-    # Open3D's RANSAC draws from its own global generator; seed it for repeatable runs.
+    from asmteach.plugins.detectors.cvfh.refine import one_thread  # refine imports this module
+
+    # Open3D's RANSAC draws from its own global generator; seeded and on one thread it repeats.
     o3d.utility.random.seed(int(seed))
-    model, inliers = down.segment_plane(s.plane_distance, 3, s.plane_iterations)
+    with one_thread():
+        model, inliers = down.segment_plane(s.plane_distance, 3, s.plane_iterations)
     frac = len(inliers) / len(down.points)
     if frac < s.plane_min_fraction:
         return None, (
@@ -204,8 +207,8 @@ def _fit_table(points: np.ndarray, s: SegmentSettings, seed: int) -> tuple[Table
             "give the cloud in the world frame with z up"
         )
     # Least-squares refinement on (a stride sample of) the full-resolution inliers, repeated until the
-    # inliers stop changing: Open3D's RANSAC is not repeatable even seeded (its threads draw in any order),
-    # and the fixed point makes the plane a function of the points, not of the RANSAC draw.
+    # inliers stop changing: the fixed point makes the plane a function of the points, not of the RANSAC
+    # draw (a seed's draw differs between Open3D versions and, on parallel threads, between runs).
     sample = points[:: max(1, len(points) // 50000)]
     chosen = None
     for _ in range(10):
