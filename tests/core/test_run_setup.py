@@ -92,3 +92,39 @@ def test_run_with_bad_input_writes_nothing(tmp_path: Path, capsys: pytest.Captur
     assert main(["run", str(_config(tmp_path, demo={"orientation": 7})), "--out", str(out)]) == 2
     assert not out.exists() or not any(out.iterdir())
     assert "demo.orientation" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_kill_9_mid_render_leaves_the_older_results_and_the_next_run_replaces_them(tmp_path: Path) -> None:
+    """render-demo writes through the same staging folder as run: a kill -9 mid-way mixes nothing in."""
+    import json
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "ground_truth.json").write_text(json.dumps({"structure": "set1_peg_in_hole", "old": True}))
+    (out / "frame_0099.jpg").write_text("an older demonstration's frame")
+    slow = _config(tmp_path, demo={"frames": 400, "approach_frames": 0, "supersample": 1})
+    proc = subprocess.Popen([sys.executable, "-m", "asmteach.core.cli", "render-demo", str(slow), "--out", str(out)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None and not list(out.glob(".partial-*/frame_*")):
+        time.sleep(0.05)
+    assert proc.poll() is None, "render-demo ended before it could be killed"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=10)
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["frame_0099.jpg",
+                                                                                    "ground_truth.json"]
+    assert json.loads((out / "ground_truth.json").read_text())["old"]
+
+    quick = tmp_path / "quick"
+    quick.mkdir()
+    cfg = _config(quick, demo={"frames": 2, "approach_frames": 0, "supersample": 1})
+    from asmteach.core.cli import main
+
+    assert main(["render-demo", str(cfg), "--out", str(out)]) == 0
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["camera.yaml", "frame_0000.jpg", "frame_0001.jpg", "ground_truth.json"]  # nothing stale
