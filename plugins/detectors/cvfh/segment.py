@@ -4,6 +4,14 @@ The cloud is in the world frame (metres, z up) with the table below the part.
 Every failure is returned as a reason string (the detector reports
 ``found: false`` with it), never raised: a bad cloud is an outcome of
 detection, not a crash.
+
+The detectors call :func:`check_cloud`, :func:`remove_table`, :func:`cluster_objects`
+and :func:`merge_nearby`. :func:`label_scene` runs the same front end and labels
+every point (what ``segment_score`` and ``benchmarks/mosd_segmentation.py`` score
+on real Kinect scenes); for scenes of unknown objects it can also cut clusters at
+concave creases (:func:`split_concave`), drop an organized cloud's mixed pixels
+(:func:`mixed_pixels`) and raise the table threshold with the depth noise
+(``min_height_sigmas``). Those are off in the detectors' defaults.
 """
 
 from __future__ import annotations
