@@ -40,7 +40,7 @@ def test_merged_split_and_table_left_are_counted() -> None:
     truth = np.array([TABLE] * 4 + [20] * 10 + [30] * 10 + [40] * 10)
     ours = np.array([1, 1, 0, 0] + [1] * 10 + [1] * 10 + [2] * 5 + [3] * 5)
     s = score_segmentation(truth, ours)
-    assert s.ious == pytest.approx([10 / 22, 10 / 22, 0.5, ])
+    assert s.ious == pytest.approx([10 / 22, 10 / 22, 0.5])
     assert s.table_points_left == 2 and s.table_segments == 1
     assert s.merged == 1 and s.split == 1
     assert s.median_iou == pytest.approx(10 / 22)
@@ -152,7 +152,7 @@ def test_label_scene_labels_nan_rows_zero() -> None:
     pts = np.vstack([table, box, np.full((10, 3), np.nan)])
     plane, labels, reason = label_scene(pts, SegmentSettings())
     assert reason is None and plane is not None and abs(plane.height) < 1e-3
-    assert set(np.unique(labels[:len(table)])) <= {0} or np.mean(labels[:len(table)] > 0) < 1e-3
+    assert np.mean(labels[: len(table)] > 0) < 1e-3  # the table (0.5 mm noise) is no object
     assert np.mean(labels[len(table):len(table) + len(box)][box[:, 2] > 0.01] == 1) > 0.97
     assert np.all(labels[-10:] == 0)
 
