@@ -52,8 +52,19 @@ def _cmd_plugins(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
+    from asmteach.core.io import read_yaml
     from asmteach.core.run_setup import load_run
 
+    raw = read_yaml(args.config)
+    if isinstance(raw, dict) and "experiment" in raw and "structure" not in raw:
+        # an experiment file: every grid point's params, as `sweep` checks them before its first trial
+        from asmteach.core.sweep import load_experiment, plan_trials
+
+        if args.set:
+            raise UserError("--set applies to run configs; edit the experiment file's params instead")
+        exp, kind = load_experiment(args.config)
+        print(f"{args.config}: ok (experiment {exp.experiment}: {len(plan_trials(exp, kind))} trials)")
+        return 0
     # The same loader as `run`: what validates here starts there (structure, meshes, markers, camera, demo,
     # execution, table, every plugin's settings).
     setup = load_run(args.config, overrides=_overrides(args.set))
@@ -65,7 +76,7 @@ def _cmd_library(args: argparse.Namespace) -> int:
     from asmteach.core.io import check_out_file
     from asmteach.core.library import render_library
 
-    out = render_library(Path(args.folder), check_out_file(args.out))
+    out = render_library(Path(args.folder), check_out_file(args.out, example="sheet.png"))
     print(f"part library contact sheet: {out}")
     return 0
 
@@ -136,7 +147,8 @@ def build_parser(pm=None) -> argparse.ArgumentParser:
     p.add_argument("--role", default=None, help="only this role (e.g. detectors)")
     p.set_defaults(func=_cmd_plugins)
 
-    p = sub.add_parser("validate", help="check a run config: builds everything `run` builds, before any work")
+    p = sub.add_parser("validate", help="check a run config (builds everything `run` builds, before any work) or "
+                       "an experiment file (every grid point)")
     p.add_argument("config")
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key (dotted path)")
     p.set_defaults(func=_cmd_validate)

@@ -96,11 +96,14 @@ def check_out_dir(path: str | os.PathLike[str], *, flag: str = "--out") -> Path:
     return p
 
 
-def check_out_file(path: str | os.PathLike[str], *, flag: str = "--out") -> Path:
-    """Make sure the file ``path`` can be written (its folder is made if missing); returns it."""
+def check_out_file(path: str | os.PathLike[str], *, flag: str = "--out", example: str = "out.json") -> Path:
+    """Make sure the file ``path`` can be written (its folder is made if missing); returns it.
+
+    ``example``: a file name suggested when ``path`` is a folder.
+    """
     p = Path(path)
     if p.is_dir():
-        raise UserError(f"{flag} {p}: is a folder; give a file name (e.g. {p / 'out.json'})")
+        raise UserError(f"{flag} {p}: is a folder; give a file name (e.g. {p / example})")
     if p.exists() and not os.access(p, os.W_OK):
         raise UserError(f"{flag} {p}: the file is read-only; give another file")
     check_out_dir(p.parent if str(p.parent) else Path("."), flag=f"{flag} {p}: folder")

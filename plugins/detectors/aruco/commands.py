@@ -108,7 +108,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     from asmteach.core import registry
     from asmteach.plugins.detectors.aruco.frames import load_frames
 
-    check_out_file(args.out)  # before any work
+    check_out_file(args.out, example="task.json")  # before any work
     cfg = _load_cfg(args.config)
     task = load_structure(cfg.path(cfg.structure))
     cls = registry.get_class("teachers", cfg.teacher.plugin)
@@ -189,9 +189,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     from asmteach.plugins.detectors.aruco.camera import save_camera
     from asmteach.plugins.detectors.aruco.frames import load_named_frames
 
-    check_out_file(args.out)
+    check_out_file(args.out, example="camera.yaml")
     if args.coverage:
-        check_out_file(args.coverage, flag="--coverage")
+        check_out_file(args.coverage, flag="--coverage", example="coverage.png")
     board = args.board.lower()
     try:
         if board == "chessboard":

@@ -88,7 +88,7 @@ def run_grasps(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".json":
         raise UserError(f"--out {args.out}: give a .json file name")
-    check_out_file(out)  # a read-only or wrong --out costs one line, before any work
+    check_out_file(out, example="grasps.json")  # a read-only or wrong --out costs one line, before any work
     if args.seed < 0:
         raise UserError(f"--seed {args.seed}: give a whole number >= 0")
     hand = load_hand(args.hand)

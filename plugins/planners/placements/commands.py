@@ -47,7 +47,7 @@ def _part_record(part: PartModel, result: PlacementResult) -> dict[str, Any]:
 
 
 def _cmd_placements(args: argparse.Namespace) -> int:
-    out = check_out_file(args.out)  # a read-only or wrong --out costs one line, before any work
+    out = check_out_file(args.out, example="placements.json")  # a wrong --out costs one line, before any work
     if not (math.isfinite(args.min_margin) and args.min_margin >= 0):
         raise UserError(f"--min-margin {args.min_margin}: give a number >= 0 (d/h, e.g. 0.1)")
     if not (math.isfinite(args.angle_tol_deg) and 0 < args.angle_tol_deg <= 45):
