@@ -129,6 +129,11 @@ def _echo(value: Any) -> str:
     return text if len(text) <= MAX_ECHO else f"a {type(value).__name__}"
 
 
+_KIND = {"str": "a text", "int": "a number", "float": "a number", "bool": "true/false", "list": "a list",
+         "NoneType": "nothing (null)"}
+"""How a value read from YAML is named in an error, by its Python type."""
+
+
 def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
     """First error of a pydantic ``ValidationError`` as ``key.path: reason (got value)``."""
     lines = []
@@ -140,11 +145,13 @@ def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
         if err["type"] == "extra_forbidden":
             msg = "unknown key (not a setting of this section; check the spelling)"
         elif err["type"] == "missing":
-            msg = "required key is missing"
+            at = err["loc"][-1] if err["loc"] else None
+            msg = (f"too few values (item [{at}] is missing)" if isinstance(at, int) and not isinstance(at, bool)
+                   else "required key is missing")
         elif err["type"] in ("model_type", "dict_type", "model_attributes_type"):
             # the whole section (or file) is not a mapping; its text is not echoed
-            got = type(err.get("input")).__name__
-            msg = f"expected a mapping of keys and values, got a {'text' if got == 'str' else got}"
+            got = _KIND.get(type(err.get("input")).__name__, f"a {type(err.get('input')).__name__}")
+            msg = f"expected a mapping of keys and values, got {got}"
         elif "input" in err and not isinstance(err["input"], dict | list):
             msg = f"{msg} (got {_echo(err['input'])})"
         msg = msg.removeprefix("Value error, ")

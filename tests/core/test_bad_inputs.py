@@ -242,6 +242,11 @@ CASES: list[Case] = [
          lambda t: _val(config(t, table={"center": [0.45, 0.0]},
                                robot={"plugin": "nextage_pybullet", "settings": {"table_center": [0.5, 0.0]}})), 2,
          r"differ"),
+    Case("scene-one-number", "execution.scene.x_range with one number",
+         lambda t: _val(config(t), "--set", "execution.scene.x_range=[0.3]"), 2,
+         r"x_range\[1\]: too few values"),
+    Case("teacher-null", "teacher: null", lambda t: _val(config(t), "--set", "teacher=null"), 2,
+         r"teacher: expected a mapping of keys and values, got nothing \(null\)"),
     Case("table-height", "table.height: 9 m", lambda t: _val(config(t, table={"height": 9})), 2, r"table\.height"),
     # --- the camera
     Case("camera-missing", "camera names no file", lambda t: _val(config(t, camera="cam.yaml")), 2,
