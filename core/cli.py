@@ -166,10 +166,12 @@ def build_parser(pm=None) -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_run, plugin_manager=pm)
 
     from asmteach.core.check_part import add_check_part_command
+    from asmteach.core.structure_corpus import add_make_structures_command
     from asmteach.core.sweep import add_sweep_command
 
     add_sweep_command(sub)
     add_check_part_command(sub, pm)
+    add_make_structures_command(sub)
 
     if pm is not None:
         pm.hook.asmteach_add_commands(subparsers=sub)
