@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import abc
 import argparse
+import contextlib
 import csv
 import hashlib
 import io
@@ -41,7 +42,7 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from importlib import metadata
 from pathlib import Path
@@ -312,33 +313,55 @@ def run_sweep(
         raise UserError(f"--workers {workers}: give 1 to 64 processes")
     if limit is not None and limit < 0:
         raise UserError(f"--limit {limit}: give a number of trials >= 0")
-    log_path = out / "trials.jsonl"
-    if log_path.exists() and not log_path.is_file():
-        raise UserError(f"{log_path}: is not a file; give another --out")
-    trials = plan_trials(exp, kind)
-    previous = current_rows(read_jsonl(log_path), trials)
-    done = {r["trial_id"] for r in previous if r.get("ok") or not retry_failed}
-    todo = [t for t in trials if t.trial_id not in done]
-    if limit is not None:
-        todo = todo[:limit]
-    write_json(out / "experiment.json", {"file": str(Path(path).resolve()), **exp.model_dump(mode="json")})
-    base_dir = str(Path(path).resolve().parent)
-    args = [(exp.experiment, base_dir, exp.model_dump_json(), t.model_dump_json(), str(out)) for t in todo]
-    n_workers = workers or exp.workers
-    bar = _Bar(len(todo), f"{exp.experiment} ({len(done)} done before)", enabled=progress)
-    with _GracefulInterrupt() as interrupt:
+    with _only_sweep_in(out):  # two sweeps appending to one log would run every trial twice
+        log_path = out / "trials.jsonl"
+        if log_path.exists() and not log_path.is_file():
+            raise UserError(f"{log_path}: is not a file; give another --out")
+        trials = plan_trials(exp, kind)
+        previous = current_rows(read_jsonl(log_path), trials)
+        done = {r["trial_id"] for r in previous if r.get("ok") or not retry_failed}
+        todo = [t for t in trials if t.trial_id not in done]
+        if limit is not None:
+            todo = todo[:limit]
+        write_json(out / "experiment.json", {"file": str(Path(path).resolve()), **exp.model_dump(mode="json")})
+        base_dir = str(Path(path).resolve().parent)
+        args = [(exp.experiment, base_dir, exp.model_dump_json(), t.model_dump_json(), str(out)) for t in todo]
+        n_workers = workers or exp.workers
+        bar = _Bar(len(todo), f"{exp.experiment} ({len(done)} done before)", enabled=progress)
+        with _GracefulInterrupt() as interrupt:
+            try:
+                if executor == "ray":
+                    _run_ray(args, log_path, bar, interrupt, n_workers)
+                elif n_workers <= 1:
+                    _run_serial(args, log_path, bar, interrupt)
+                else:
+                    _run_pool(args, log_path, bar, interrupt, n_workers)
+            finally:
+                bar.close()
+        rows = current_rows(read_jsonl(log_path), trials)
+        summarize(rows, out, kind(Path(base_dir)), title=exp.experiment)
+        return rows
+
+
+@contextlib.contextmanager
+def _only_sweep_in(out: Path) -> Iterator[None]:
+    """Hold ``out/.sweep.lock`` (``flock``) while a sweep writes into ``out``; :class:`UserError` if another
+    does. The kernel drops the lock when its holder dies, even by kill -9."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no lock
+        yield
+        return
+    fd = os.open(out / ".sweep.lock", os.O_RDWR | os.O_CREAT, 0o666)
+    try:
         try:
-            if executor == "ray":
-                _run_ray(args, log_path, bar, interrupt, n_workers)
-            elif n_workers <= 1:
-                _run_serial(args, log_path, bar, interrupt)
-            else:
-                _run_pool(args, log_path, bar, interrupt, n_workers)
-        finally:
-            bar.close()
-    rows = current_rows(read_jsonl(log_path), trials)
-    summarize(rows, out, kind(Path(base_dir)), title=exp.experiment)
-    return rows
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise UserError(f"--out {out}: another sweep is writing into this folder; wait for it to end, or give "
+                            "another folder") from None
+        yield
+    finally:
+        os.close(fd)
 
 
 class _GracefulInterrupt:

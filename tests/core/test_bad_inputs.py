@@ -469,6 +469,10 @@ CASES: list[Case] = [
     Case("validate-experiment-bad", "validate of an experiment file with a bad grid value",
          lambda t: _val(experiment(t, "experiment: toy_square\ngrid: {x: [1, two]}\n")), 2,
          r"params\.x: Input should be a valid number", needs=("toy_dist",)),
+    Case("sweep-concurrent", "a second sweep into a folder another sweep is writing",
+         lambda t: ["sweep", str(experiment(t, SQUARE)), "--out", str(t / "o")], 2,
+         r"another sweep is writing into this folder", fault=lambda t, mp: _hold_sweep_lock(t / "o", mp),
+         needs=("toy_dist",)),
     Case("sweep-binary", "sweep file is binary", lambda t: ["sweep", str(write(t, "e.yaml", b"\x00PK")), "--out",
                                                             str(t / "o")], 2, r"binary"),
     Case("sweep-full-disk", "a full disk while the sweep logs its trials (ENOSPC)",
@@ -523,6 +527,18 @@ def _crashing_renderer(monkeypatch: pytest.MonkeyPatch, error: Exception | None 
     monkeypatch.setattr(ArucoTeacher, "demonstrate", demonstrate)
 
 
+def _hold_sweep_lock(out: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Another sweep holds ``out``'s lock (an open file description of this process stands for it)."""
+    import fcntl
+
+    fd = os.open(_mk(out) / ".sweep.lock", os.O_RDWR | os.O_CREAT)
+    fcntl.flock(fd, fcntl.LOCK_EX)
+    _OPEN_FDS.append(fd)  # closed when the case ends
+
+
+_OPEN_FDS: list[int] = []
+
+
 def _full_disk_on_json(monkeypatch: pytest.MonkeyPatch) -> None:
     """The JSON writer's file fails with ENOSPC (as ``write`` does on a full disk)."""
     from asmteach.core import io
@@ -554,6 +570,8 @@ def test_bad_input_gives_one_line_and_the_right_exit_code(case: Case, tmp_path: 
         code = main(argv)
     finally:
         monkeypatch.undo()  # before the tmp folder is cleaned up (a read-only folder must be writable again)
+        while _OPEN_FDS:
+            os.close(_OPEN_FDS.pop())
         for p in work.rglob("*"):
             if p.is_dir():
                 p.chmod(0o755)
