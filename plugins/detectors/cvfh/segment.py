@@ -80,6 +80,13 @@ class SegmentSettings(StrictModel):
         " to both neighbours along a row or column, with flat ground on both sides, is a mixed pixel (between a"
         " foreground edge and the background; 0: keep them)",
     )
+    local_table_cell: float = Field(
+        0.0,
+        ge=0.0,
+        description="measure heights from the table around each point (median heights in squares of this"
+        " side, 3 x 3 around it) instead of the fitted plane: a real table and a Kinect's depth are not flat"
+        " to a millimetre over a metre (0: the plane)",
+    )
     split_concave: bool = Field(
         False,
         description="split each cluster at its concave creases (objects that touch: a box on a box, a cup"
@@ -395,7 +402,47 @@ def _above_mask(
     if viewpoint is not None and settings.min_height_sigmas > 0:
         rng = np.linalg.norm(points - np.asarray(viewpoint, dtype=float), axis=1)
         low = np.maximum(low, settings.min_height_sigmas * depth_sigma(rng))
+    if settings.local_table_cell > 0:
+        h = h - _local_table(points, h, h <= low, table, settings.local_table_cell)
     return (h > low) & (h < settings.max_height)
+
+
+def _local_table(
+    points: np.ndarray, h: np.ndarray, on_table: np.ndarray, table: TablePlane, cell: float
+) -> np.ndarray:
+    """Per point the height of the table around it above the fitted plane (metres).
+
+    The table's points are binned in ``cell``-sized squares of the plane; a point's local table is the
+    count-weighted mean of the median heights in its square and the 8 around it (squares with fewer than
+    10 table points count for nothing; none around: 0, the plane).
+    """
+    n = np.asarray(table.normal, dtype=float)
+    n = n / np.linalg.norm(n)
+    u = np.cross(n, [0.0, 1.0, 0.0] if abs(n[0]) > 0.9 else [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    ij = np.floor(np.stack([points @ u, points @ v], axis=1) / cell).astype(np.int64)
+    t_ij, t_h = ij[on_table], h[on_table]
+    if len(t_h) == 0:
+        return np.zeros(len(points))
+    cells, inv, count = np.unique(t_ij, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.reshape(-1)
+    order = np.lexsort((t_h, inv))  # by square, then by height: each square's median is its middle row
+    start = np.concatenate([[0], np.cumsum(count)[:-1]])
+    med = t_h[order][start + count // 2]
+    weight = np.where(count >= 10, count, 0).astype(float)
+    lookup = {tuple(c): k for k, c in enumerate(cells.tolist())}
+    acc = np.zeros(len(points))
+    wsum = np.zeros(len(points))
+    keys, back = np.unique(ij, axis=0, return_inverse=True)
+    back = back.reshape(-1)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            k = np.array([lookup.get((a + di, b + dj), -1) for a, b in keys.tolist()], dtype=np.int64)
+            w = np.where(k >= 0, weight[np.maximum(k, 0)], 0.0)
+            acc += (w * med[np.maximum(k, 0)])[back]
+            wsum += w[back]
+    return np.where(wsum > 0, acc / np.maximum(wsum, 1e-12), 0.0)
 
 
 def _normals(
