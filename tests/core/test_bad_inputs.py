@@ -389,7 +389,10 @@ CASES: list[Case] = [
          r"no images"),
     Case("teach-frame-garbage", "teach --frames with a garbage JPEG",
          lambda t: ["teach", str(config(t)), "--frames", str(write(t, "f/0001.jpg", b"\xff\xd8junk").parent),
-                    "--out", str(t / "task.json")], 2, r"cannot read the image"),
+                    "--out", str(t / "task.json")], 2, r"JPEG is cut short"),
+    Case("teach-frame-truncated", "teach --frames with a JPEG cut short (OpenCV decodes it silently)",
+         lambda t: ["teach", str(config(t)), "--frames", str(_truncated_jpeg(t / "f")), "--out",
+                    str(t / "task.json")], 2, r"0001\.jpg: the JPEG is cut short"),
     Case("render-demo-out-file", "render-demo --out is a file",
          lambda t: ["render-demo", str(config(t)), "--out", str(write(t, "o", "x"))], 2, r"is a file"),
     Case("render-demo-no-markers", "render-demo of a part without markers",
@@ -497,6 +500,18 @@ def _part_file(tmp: Path) -> str:
     data["mesh"] = f"meshes/{mesh.name}"
     write(tmp, "parts/meshy.yaml", yaml.safe_dump(data))
     return "parts/meshy.yaml"
+
+
+def _truncated_jpeg(folder: Path) -> Path:
+    """A folder with a whole JPEG and one cut to 60 % of its bytes."""
+    import cv2
+
+    img = (np.random.default_rng(0).random((120, 160, 3)) * 255).astype(np.uint8)
+    ok, buf = cv2.imencode(".jpg", img)
+    assert ok
+    write(folder, "0000.jpg", buf.tobytes())
+    write(folder, "0001.jpg", buf.tobytes()[: int(0.6 * len(buf))])
+    return folder
 
 
 def _other_run(out: Path) -> None:

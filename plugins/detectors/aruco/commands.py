@@ -115,6 +115,7 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     settings = validate_settings(cls, cfg.teacher.settings, where="teacher.settings")
     frames_path = Path(args.frames)
     camera, cam_source = resolve_camera(args.camera, cfg, frames_path)
+    _check_jpegs_whole(frames_path)
     frames = load_frames(frames_path)
     teacher = cls(settings, seed=cfg.seed)
     learned = teacher.teach(frames, camera, task)
@@ -129,6 +130,23 @@ def _cmd_teach(args: argparse.Namespace) -> int:
               f"{ev.spread_deg:.3f} deg")
     print(f"  wrote {args.out}")
     return 0
+
+
+def _check_jpegs_whole(folder: Path) -> None:
+    """:class:`UserError` for a JPEG frame cut short (no end-of-image marker): OpenCV decodes it with a grey
+    bottom and says nothing, and its markers there would be wrong."""
+    if not folder.is_dir():
+        return
+    for f in sorted(folder.iterdir()):
+        if f.suffix.lower() not in (".jpg", ".jpeg") or not f.is_file():
+            continue
+        with open(f, "rb") as fh:
+            size = fh.seek(0, 2)
+            fh.seek(max(0, size - 64))
+            tail = fh.read()
+        if size > 2 and b"\xff\xd9" not in tail:  # EOI; a few padding bytes after it are allowed
+            raise UserError(f"{f}: the JPEG is cut short (no end-of-image marker; {size} bytes); copy it again or "
+                            "remove it from the frames")
 
 
 def write_demo(cfg: RunConfig, out: Path, *, camera: CameraIntrinsics | None = None) -> dict:
