@@ -402,6 +402,9 @@ CASES: list[Case] = [
          lambda t: ["render-demo", str(config(t, demo={"frame": 2})), "--out", str(t / "o")], 2, r"demo\.frame"),
     Case("calibrate-out-folder", "calibrate --out is a folder",
          lambda t: ["calibrate", "--images", str(t), "--out", str(t)], 2, r"is a folder"),
+    Case("calibrate-truncated", "calibrate --images with a JPEG cut short",
+         lambda t: ["calibrate", "--images", str(_truncated_jpeg(t / "f")), "--out", str(t / "c.yaml")], 2,
+         r"0001\.jpg: the JPEG is cut short"),
     Case("calibrate-board", "calibrate --board 7by5",
          lambda t: ["calibrate", "--images", str(t), "--out", str(t / "c.yaml"), "--board", "7by5"], 2, r"--board"),
     # --- library

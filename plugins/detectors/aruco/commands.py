@@ -226,6 +226,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         msg = (format_validation_error(exc) if isinstance(exc, ValidationError)
                else "give --board as NxM ChArUco squares (e.g. 7x5) or chessboard")
         raise UserError(f"--board/--cols/--rows/--square/--marker: {msg}") from None
+    _check_jpegs_whole(Path(args.images))
     named = load_named_frames(args.images)
     names, images = [n for n, _ in named], [img for _, img in named]
     if board == "chessboard":
