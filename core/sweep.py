@@ -225,11 +225,40 @@ def params_for(kind: type[Experiment], exp: ExperimentFile, point: dict[str, Any
         raise UserError(f"{prefix}{format_validation_error(exc, 'params')}") from None
 
 
-def params_hash(kind_name: str, params: Any) -> str:
-    """Hash of a trial's resolved params (every value, defaults included) and its experiment kind."""
+def params_hash(kind_name: str, params: Any, base_dir: Path | None = None) -> str:
+    """Hash of a trial's resolved params (every value, defaults included) and its experiment kind.
+
+    With ``base_dir`` (the experiment file's folder), a text param naming a
+    file there (``run_config: ../demo.yaml``) adds the file's contents: a
+    run config edited between two runs of a sweep is other params too. One
+    level only: the files such a file names in turn are not read.
+    """
     resolved = params.model_dump(mode="json") if hasattr(params, "model_dump") else params
-    blob = json.dumps({"kind": kind_name, "params": resolved}, sort_keys=True, default=str)
+    files: dict[str, str] = {}
+    if base_dir is not None:
+        for value in _texts(resolved):
+            if len(value) < 4096 and "\n" not in value:
+                try:
+                    path = resolve_relative(value, base_dir)
+                    if path.is_file() and path.stat().st_size < 16_000_000:
+                        files[value] = hashlib.sha1(path.read_bytes()).hexdigest()
+                except (OSError, ValueError):
+                    continue
+    blob = json.dumps({"kind": kind_name, "params": resolved, **({"files": files} if files else {})},
+                      sort_keys=True, default=str)
     return hashlib.sha1(blob.encode()).hexdigest()[:12]
+
+
+def _texts(node: Any) -> Iterator[str]:
+    """Every text value in a tree of params."""
+    if isinstance(node, str):
+        yield node
+    elif isinstance(node, dict):
+        for v in node.values():
+            yield from _texts(v)
+    elif isinstance(node, list):
+        for v in node:
+            yield from _texts(v)
 
 
 def trial_id(point: dict[str, Any], seed: int, resolved: str = "") -> str:
@@ -247,12 +276,13 @@ def trial_id(point: dict[str, Any], seed: int, resolved: str = "") -> str:
     return hashlib.sha1(blob.encode()).hexdigest()[:12]
 
 
-def plan_trials(exp: ExperimentFile, kind: type[Experiment] | None = None) -> list[TrialSpec]:
+def plan_trials(exp: ExperimentFile, kind: type[Experiment] | None = None,
+                base_dir: Path | None = None) -> list[TrialSpec]:
     """Every (grid point, seed) pair of the experiment; ids include the resolved params' hash when ``kind``
-    is given (as :func:`run_sweep` does)."""
+    is given (as :func:`run_sweep` does, with the experiment file's folder as ``base_dir``)."""
     out = []
     for point in grid_points(exp):
-        resolved = params_hash(exp.experiment, params_for(kind, exp, point)) if kind is not None else ""
+        resolved = params_hash(exp.experiment, params_for(kind, exp, point), base_dir) if kind is not None else ""
         out += [TrialSpec(trial_id=trial_id(point, seed, resolved), point=point, seed=seed) for seed in exp.seed_list()]
     return out
 
@@ -317,7 +347,7 @@ def run_sweep(
         log_path = out / "trials.jsonl"
         if log_path.exists() and not log_path.is_file():
             raise UserError(f"{log_path}: is not a file; give another --out")
-        trials = plan_trials(exp, kind)
+        trials = plan_trials(exp, kind, Path(path).resolve().parent)
         previous = current_rows(read_jsonl(log_path), trials)
         done = {r["trial_id"] for r in previous if r.get("ok") or not retry_failed}
         todo = [t for t in trials if t.trial_id not in done]

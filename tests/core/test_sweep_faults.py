@@ -12,8 +12,7 @@
 
 The experiment kind is a third-party distribution made in tmp: each trial
 writes its worker's pid to ``runs.txt`` in its work folder, sleeps a little
-and returns ``x * 10 + seed + offset``; it fails while the file named by
-``fail_flag`` exists.
+and returns ``x * 10 + seed + offset``; it fails while ``$NAP_FAIL`` is set.
 """
 
 from __future__ import annotations
@@ -49,7 +48,7 @@ class NapParams(StrictModel):
     x: int = 0
     sleep: float = 0.2
     offset: int = 0
-    fail_flag: str = ""
+    config: str = ""
 
 
 class Nap(Experiment):
@@ -58,8 +57,8 @@ class Nap(Experiment):
     def run_trial(self, params, seed, workdir):
         with open(workdir / "runs.txt", "a") as fh:
             fh.write(f"{os.getpid()}\\n")
-        if params.fail_flag and Path(params.fail_flag).exists():
-            raise RuntimeError("the flag says fail")
+        if os.environ.get("NAP_FAIL"):
+            raise RuntimeError("NAP_FAIL says fail")
         time.sleep(params.sleep)
         return {"y": params.x * 10 + seed + params.offset}
 '''
@@ -200,14 +199,27 @@ def test_edited_params_run_again_and_old_results_stay_out_of_the_summary(nap, tm
     assert "24 trials" not in (out / "summary.md").read_text() and f"{TOTAL} trials" in (out / "summary.md").read_text()
 
 
-def test_failed_trials_run_again_only_with_retry_failed(nap, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    flag = tmp_path / "fail.flag"
-    flag.write_text("")
-    exp = nap(workers=1, sleep=0.0, fail_flag=str(flag))
+def test_a_file_named_by_the_params_is_part_of_them(nap, tmp_path: Path) -> None:
+    """A run config edited between two runs of a sweep is other params: its trials run again."""
+    (tmp_path / "run.yaml").write_text("seed: 1\n")
     out = tmp_path / "out"
+    first = run_sweep(nap(workers=1, sleep=0.0, config="run.yaml"), out, progress=False)
+    assert len(run_sweep(nap(workers=1, sleep=0.0, config="run.yaml"), out, progress=False)) == TOTAL
+    assert len(read_jsonl(out / "trials.jsonl")) == TOTAL  # unchanged file: nothing ran again
+    (tmp_path / "run.yaml").write_text("seed: 2\n")
+    second = run_sweep(nap(workers=1, sleep=0.0, config="run.yaml"), out, progress=False)
+    assert not set(_results(first)) & set(_results(second))
+    assert len(read_jsonl(out / "trials.jsonl")) == 2 * TOTAL
+
+
+def test_failed_trials_run_again_only_with_retry_failed(nap, tmp_path: Path, capsys: pytest.CaptureFixture,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    exp = nap(workers=1, sleep=0.0)
+    out = tmp_path / "out"
+    monkeypatch.setenv("NAP_FAIL", "1")
     assert main(["sweep", str(exp), "--out", str(out)]) == 1
     assert f"{TOTAL} of {TOTAL} trials failed" in capsys.readouterr().err
-    flag.unlink()
+    monkeypatch.delenv("NAP_FAIL")
     assert main(["sweep", str(exp), "--out", str(out)]) == 1  # a failed trial is a result: kept on resume
     assert len(read_jsonl(out / "trials.jsonl")) == TOTAL
     assert main(["sweep", str(exp), "--out", str(out), "--retry-failed"]) == 0
