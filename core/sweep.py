@@ -448,9 +448,24 @@ def _run_serial(args: list[tuple[Any, ...]], log_path: Path, bar: _Bar, interrup
         raise KeyboardInterrupt
 
 
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 def _die_with_parent(parent: int) -> None:
-    """Have the kernel kill this process when its parent dies (Linux ``PR_SET_PDEATHSIG``); elsewhere, a
-    thread that watches the parent. A sweep killed with -9 then leaves no workers running on."""
+    """End this worker when the sweep process ``parent`` dies, so a sweep killed with -9 leaves none running.
+
+    Linux: the kernel kills the worker when the process that forked it dies
+    (``PR_SET_PDEATHSIG``; with a fork server in between, the fork server,
+    which ends with the sweep). Elsewhere, or without ``prctl``, a thread
+    watches ``parent``.
+    """
     if sys.platform.startswith("linux"):
         import ctypes
 
@@ -460,12 +475,12 @@ def _die_with_parent(parent: int) -> None:
         except (OSError, AttributeError):  # no prctl: the watching thread below does it
             pass
         else:
-            if os.getppid() != parent:  # the parent died before the request was made
+            if not _pid_alive(parent):  # the sweep died before the request was made
                 os._exit(1)
             return
 
     def watch() -> None:
-        while os.getppid() == parent:
+        while _pid_alive(parent):
             time.sleep(0.5)
         os._exit(1)
 

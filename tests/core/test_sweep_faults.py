@@ -304,3 +304,41 @@ def test_a_damaged_grasp_cache_is_planned_again(damage: str, tmp_path: Path, mon
     path.write_bytes(DAMAGE[damage](path.read_bytes()))
     assert len(planner.plan(part, hand)) == 1 and len(calls) == 2
     assert planner.plan(part, hand)[0].width == pytest.approx(0.03) and len(calls) == 2  # read back
+
+
+WATCHED = '''
+import os, sys, time, multiprocessing as mp
+from asmteach.core import sweep
+
+def worker(parent, path):
+    sys.platform = "other"  # no prctl: the watching thread must do it
+    sweep._die_with_parent(parent)
+    open(path, "w").write(str(os.getpid()))
+    time.sleep(60)
+
+if __name__ == "__main__":
+    mp.set_start_method("fork")
+    p = mp.Process(target=worker, args=(os.getpid(), sys.argv[1]))
+    p.start()
+    time.sleep(60)
+'''
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_without_prctl_a_thread_ends_the_worker_with_its_parent(tmp_path: Path) -> None:
+    script, pid_file = tmp_path / "watched.py", tmp_path / "worker.pid"
+    script.write_text(WATCHED)
+    proc = subprocess.Popen([sys.executable, str(script), str(pid_file)], start_new_session=True)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and not (pid_file.exists() and pid_file.read_text()):
+        time.sleep(0.05)
+    worker = int(pid_file.read_text())
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=10)
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline and _alive(worker):
+        time.sleep(0.05)
+    alive = _alive(worker)
+    if alive:
+        os.kill(worker, signal.SIGKILL)
+    assert not alive, "the worker outlived its parent"
