@@ -119,6 +119,8 @@ def prepare_run(cfg: RunConfig) -> RunSetup:
             raise UserError(f"{structure.name}: {key} ({spec.name}): {exc}") from None
     part_a, part_b = parts
     _check_contact(task, part_a, part_b, structure)
+    for key, part in (("part_a", part_a), ("part_b", part_b)):
+        _check_markers_on_surface(key, part, structure)
 
     camera_file = cfg.path(cfg.camera) if cfg.camera else None
     if camera_file is not None and not camera_file.is_file():
@@ -163,6 +165,23 @@ def _check_contact(task: AssemblyTask, a: PartModel, b: PartModel, structure: Pa
     if dist > CONTACT_GAP_M:
         raise UserError(f"{structure.name}: T_A_B puts {b.name} {1000 * dist:.0f} mm away from {a.name}; assembled, "
                         "B touches A (T_A_B is B's pose in A's frame in metres: millimetres written as metres?)")
+
+
+MARKER_OFF_SURFACE_M = 0.002
+"""Largest distance (metres) of a marker's centre from its part's surface: a marker is printed on a face."""
+
+
+def _check_markers_on_surface(key: str, part: PartModel, structure: Path) -> None:
+    """Each marker's centre must lie on the part's surface (within :data:`MARKER_OFF_SURFACE_M`)."""
+    if not part.spec.markers:
+        return
+    centres = np.array([np.asarray(m.T_part_marker, float)[:3, 3] for m in part.spec.markers])
+    _, dist, _ = part.mesh.nearest.on_surface(centres)
+    for i, d in enumerate(np.asarray(dist, float)):
+        if d > MARKER_OFF_SURFACE_M:
+            raise UserError(f"{structure.name}: {key}.markers[{i}] (id {part.spec.markers[i].id}): its centre is "
+                            f"{1000 * d:.0f} mm off {part.name}'s surface; a marker is printed on a face "
+                            "(T_part_marker is in the part frame, metres)")
 
 
 def _check_scene(ex: ExecutionSettings) -> None:

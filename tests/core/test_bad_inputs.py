@@ -76,9 +76,15 @@ def box_stl(tmp: Path, name: str = "box.stl", scale: float = 1.0, drop: int = 0)
     return path
 
 
+BOX_MARKERS = [  # on the faces of box_stl's box (centred on the origin)
+    {"id": 0, "size": 0.015, "T_part_marker": {"xyz": [0, -0.015, 0], "rpy_deg": [90, 0, 0]}},
+    {"id": 1, "size": 0.015, "T_part_marker": {"xyz": [0.02, 0, 0], "rpy_deg": [90, 0, 90]}},
+]
+
+
 def inline_mesh_part(data: dict, mesh: str) -> None:
-    """Part A written inline with a mesh path (relative to the structure file), markers kept."""
-    data["part_a"] = {"name": "meshy", "mesh": mesh, "markers": data["part_a"]["markers"]}
+    """Part A written inline as box_stl's mesh (a path relative to the structure file), with markers on it."""
+    data["part_a"] = {"name": "meshy", "mesh": mesh, "markers": BOX_MARKERS}
 
 
 def experiment(tmp: Path, text: str) -> Path:
@@ -275,6 +281,9 @@ CASES: list[Case] = [
          r"unknown ArUco dictionary"),
     Case("marker-id-range", "marker id beyond its dictionary",
          lambda t: _val(config(t, edit_structure=_set("part_b.markers.0.id", 900))), 2, r"does not exist in"),
+    Case("marker-off-surface", "a marker placed in millimetres (30 m off the part)",
+         lambda t: _val(config(t, edit_structure=_set("part_a.markers.0.T_part_marker.xyz", [0, -30, 20]))), 2,
+         r"part_a\.markers\[0\] \(id 0\): its centre is 3\d\d\d\d mm off holed_block's surface"),
     Case("marker-size", "marker size negative",
          lambda t: _val(config(t, edit_structure=_set("part_b.markers.0.size", -0.02))), 2, r"size"),
     Case("part-color", "part colour 255 (0..1 expected)",
@@ -498,9 +507,7 @@ def _mk(path: Path) -> Path:
 def _part_file(tmp: Path) -> str:
     """``parts/meshy.yaml`` naming ``meshes/box.stl`` relative to itself; returns its path from the structure."""
     mesh = box_stl(_mk(tmp / "parts" / "meshes"))
-    data = yaml.safe_load(STRUCTURE.read_text())["part_a"]
-    data.pop("solid")
-    data["mesh"] = f"meshes/{mesh.name}"
+    data = {"name": "meshy", "mesh": f"meshes/{mesh.name}", "markers": BOX_MARKERS}
     write(tmp, "parts/meshy.yaml", yaml.safe_dump(data))
     return "parts/meshy.yaml"
 
