@@ -5,9 +5,12 @@ sampled yaws at the start position / goal pose) is searched for keyframes;
 arm motions between keyframes come from the configured motion planner;
 approaches, lifts and the final insertion are straight Cartesian lines. When
 a motion between two keyframes fails, that edge is banned and the graph
-searched again, within a time budget. The keyframes and straight lines of a
-sequence are all checked before the motion planner is asked for any of its
-free motions, so a sequence that fails at a line is dropped in milliseconds.
+searched again, up to ``max_attempts`` sequences: a count, so the same seed
+gives the same plan on a busy machine (the wall-clock caps are a safety net,
+listed in the stats' ``wall_clock_cuts`` when they cut). The keyframes and
+straight lines of a sequence are all checked before the motion planner is
+asked for any of its free motions, so a sequence that fails at a line is
+dropped in milliseconds.
 
 The middle layer is built lazily: when the start and goal layers already share
 a grasp, the cheapest path never regrasps (each regrasp costs
