@@ -104,6 +104,12 @@ class SegmentSettings(StrictModel):
         description="surface variation (smallest eigenvalue share of the neighbourhood) above which a point is a"
         " crease and grows no region",
     )
+    crease_rings: int = Field(
+        2,
+        ge=0,
+        description="crease points are widened by this many rings of neighbours (2.5 cluster_voxel each)"
+        " before smooth regions grow, so a thin bridge of noisy points does not join two objects",
+    )
     concave_angle_deg: float = Field(
         20.0,
         gt=0.0,
@@ -471,7 +477,8 @@ def split_concave(
     A model-free cut for objects that touch (Stein et al.'s LCCP idea on smooth regions instead of
     supervoxels): points grow smooth regions through neighbours (within ``2.5 cluster_voxel``) whose
     normals differ by less than ``smooth_angle_deg`` and that are no crease (surface variation below
-    ``max_curvature``); creases and tiny regions join their neighbours; then adjacent regions merge unless
+    ``max_curvature``, and ``crease_rings`` neighbour steps from any point above it); creases and tiny
+    regions join their neighbours; then adjacent regions merge unless
     the boundary between them is concave - the normals of their points near it (``patch_radius``) turn
     toward each other by more than ``concave_angle_deg``. Two faces of one box meet at a convex edge, a box
     standing on another or a cup against a bowl at a concave one. ``pts`` is ``(n, 3)`` metres, any frame
@@ -491,12 +498,14 @@ def split_concave(
     if len(edges) == 0:
         return np.zeros(n, dtype=np.int64)
     a, b = edges[:, 0], edges[:, 1]
-    # A point grows regions only if it and all its neighbours are no crease: the crease band is widened by
-    # one ring, so two or three noisy crease points that fall just under max_curvature bridge nothing.
-    crease = curv > s.max_curvature
-    near_crease = crease.copy()
-    near_crease[a[crease[b]]] = True
-    near_crease[b[crease[a]]] = True
+    # A point grows regions only if no crease is within crease_rings neighbour steps: the widened band keeps
+    # a few noisy crease points that fall just under max_curvature from bridging two objects.
+    near_crease = curv > s.max_curvature
+    for _ in range(s.crease_rings):
+        ring = near_crease.copy()
+        ring[a[near_crease[b]]] = True
+        ring[b[near_crease[a]]] = True
+        near_crease = ring
     flat = ~near_crease
     cos_s = np.cos(np.radians(s.smooth_angle_deg))
     smooth = flat[a] & flat[b] & (np.einsum("ij,ij->i", nrm[a], nrm[b]) >= cos_s)
