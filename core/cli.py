@@ -63,7 +63,8 @@ def _cmd_validate(args: argparse.Namespace) -> int:
         if args.set:
             raise UserError("--set applies to run configs; edit the experiment file's params instead")
         exp, kind = load_experiment(args.config)
-        print(f"{args.config}: ok (experiment {exp.experiment}: {len(plan_trials(exp, kind))} trials)")
+        n = len(plan_trials(exp, kind))
+        print(f"{args.config}: ok (experiment {exp.experiment}: {n} trial{'' if n == 1 else 's'})")
         return 0
     # The same loader as `run`: what validates here starts there (structure, meshes, markers, camera, demo,
     # execution, table, every plugin's settings).
