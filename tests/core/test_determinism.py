@@ -82,8 +82,9 @@ def test_the_demo_gives_the_same_report_and_plan_in_this_process_and_in_another(
     hash_seed = str(int(os.environ.get("PYTHONHASHSEED", "0") or 0) + 1)
     env = {**os.environ, "PYTHONHASHSEED": hash_seed}
     code = "import sys; from asmteach.core.cli import main; sys.exit(main(sys.argv[1:]))"
-    subprocess.run([sys.executable, "-c", code, "run", str(DEMO), "--out", str(there), *ARGS],
-                   env=env, cwd=tmp_path, check=False, capture_output=True, timeout=1800)
+    proc = subprocess.run([sys.executable, "-c", code, "run", str(DEMO), "--out", str(there), *ARGS],
+                          env=env, cwd=tmp_path, check=False, capture_output=True, text=True, timeout=1800)
+    assert (there / "plan.json").is_file(), proc.stderr[-2000:]
     report = _load(here, "report.json")
     assert report["stages"] and all(s["ok"] for s in report["stages"]), report["reason"]
     for name in ("report.json", "plan.json"):
