@@ -7,7 +7,7 @@ compared exactly (floats bit for bit), except under the keys of
 :data:`TIMING_KEYS`, which hold wall-clock measurements of this machine.
 
 Run it alone: ``.venv/bin/python -m pytest -p no:warnings tests/core/test_determinism.py``
-(about two runs of the demo without its animation, 2-4 min).
+(two runs of the demo without its animation: 2-5 min on two shared cores).
 """
 
 from __future__ import annotations
