@@ -131,35 +131,20 @@ class _Site:
         return room / (1.0 + 2.0 * _QUIET_CELLS / _MARKER_CELLS)
 
 
-def _rect(center: tuple[float, float, float], normal: tuple[float, float, float], lo: tuple[float, float, float],
-          hi: tuple[float, float, float]) -> _Site:
-    """A site from a face's box bounds ``lo``..``hi`` (flat along the normal's axis) and its outward normal."""
-    lo_a, hi_a = np.asarray(lo, float), np.asarray(hi, float)
-    axis = int(np.argmax(np.abs(normal)))
-    ext = [0.5 * (hi_a[i] - lo_a[i]) for i in range(3) if i != axis]
-    c = 0.5 * (lo_a + hi_a)
-    c[axis] = center[axis]
-    return _Site(tuple(float(v) for v in c), normal, (float(ext[0]), float(ext[1])))
-
-
 def _face(axis: str, value: float, lo: tuple[float, float], hi: tuple[float, float]) -> _Site:
-    """A rectangle on the plane ``<axis> = value`` with outward normal ``sign(axis)``.
+    """A rectangle on the plane ``<axis> = value`` with outward normal ``sign(axis)`` (metres).
 
     ``axis`` is one of ``+x -x +y -y +z -z``; ``lo``/``hi`` bound the other two
-    coordinates in order (x, y, z without the normal's one), metres.
+    coordinates in order (x, y, z without the normal's one).
     """
-    sign = 1.0 if axis[0] == "+" else -1.0
     k = "xyz".index(axis[1])
     normal = [0.0, 0.0, 0.0]
-    normal[k] = sign
-    others = [i for i in range(3) if i != k]
-    lo3, hi3 = [0.0] * 3, [0.0] * 3
-    lo3[k] = hi3[k] = value
-    for j, i in enumerate(others):
-        lo3[i], hi3[i] = lo[j], hi[j]
-    center = [0.0] * 3
-    center[k] = value
-    return _rect(tuple(center), tuple(normal), tuple(lo3), tuple(hi3))
+    normal[k] = 1.0 if axis[0] == "+" else -1.0
+    centre = [0.0, 0.0, 0.0]
+    centre[k] = value
+    for j, i in enumerate(i for i in range(3) if i != k):
+        centre[i] = 0.5 * (lo[j] + hi[j])
+    return _Site(tuple(centre), tuple(normal), (0.5 * (hi[0] - lo[0]), 0.5 * (hi[1] - lo[1])))
 
 
 def _marker_pose(site: _Site) -> np.ndarray:
@@ -324,7 +309,8 @@ def _peg(rng: np.random.Generator, kind: str) -> _Build:
         sites_b += _block_sites(head_w, head_w, head_h, z0=az)
     noun = {"round": "round", "square": "square", "hex": "hexagonal", "d": "D-section", "keyed": "keyed"}[kind]
     return _Build(
-        a, b, (0.0, 0.0, -1.0), c, ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)) if kind not in ("hex",) else ((0.0, 1.0, 0.0),),
+        # a hexagon's flats face +-y; across its corners (x) the play is c / cos 30 deg
+        a, b, (0.0, 0.0, -1.0), c, ((0.0, 1.0, 0.0),) if kind == "hex" else ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
         sites_a, sites_b, f"{'through' if through else 'blind'}_holed_block", f"{kind}_peg",
         f"{noun} peg with a {'round' if round_head else 'square'} head in a {'through' if through else 'blind'} hole",
         {"r_mm": r * 1e3, "block_mm": f"{ax * 1e3:.1f}x{ay * 1e3:.1f}x{az * 1e3:.1f}", "shank_mm": length * 1e3,
