@@ -374,6 +374,8 @@ def time_optimal(
     stop = np.zeros(len(q), dtype=bool)
     stop[[0, -1]] = True
     for i in stops:
+        if not 0 <= int(i) < len(pts):
+            raise UserError(f"time parametrisation: stop {i} is not a waypoint index (0..{len(pts) - 1})")
         stop[new_index[int(i)]] = True
     dev = np.full(len(q), float(max_deviation))
     if len(q) >= 3:

@@ -167,3 +167,5 @@ def test_deterministic_and_bad_input() -> None:
         time_optimal(PATH, V, A, max_deviation=-1.0)
     with pytest.raises(UserError, match="path_speed"):
         time_optimal(PATH, V, A, path_speed=0.0)
+    with pytest.raises(UserError, match="stop 9"):
+        time_optimal(PATH, V, A, stops=[9])
