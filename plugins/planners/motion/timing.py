@@ -11,6 +11,12 @@ gets a triangular profile. This is time-optimal for each segment under the
 rest-to-rest, straight-line constraint (not across waypoints; simplified paths
 have few of them). Samples are evenly spaced within each segment at no less
 than ``rate_hz`` and always include every waypoint at its arrival time.
+
+This is the old timing: a straight TCP line (a waypoint every few millimetres)
+stops at every waypoint. Plans are now timed by default with
+:mod:`.blended` (toppra through all waypoints, corner blends); this one stays
+as ``to_plan(timing="trapezoid")``, the reference of ``benchmarks/cycle_time.py``
+and the fall-back where toppra fails or gains nothing.
 """
 
 from __future__ import annotations
