@@ -376,7 +376,7 @@ class CvfhIcpDetector(Detector):
         centroid = cluster.mean(axis=0)
         T_world_vcam = look_at(eye, centroid, _up_for(centroid - eye))
         local = geometry.transform_points(geometry.invert(T_world_vcam), cluster)
-        desc = describe_cloud(local, s.descriptors)
+        desc = describe_cloud(local, s.descriptors, lap=clock.lap)
         clock.lap("descriptors")
         if desc is None:
             return _Outcome()

@@ -20,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -166,11 +167,14 @@ def align_to_z(c: np.ndarray) -> np.ndarray:
     return geometry.from_rotvec(axis / s * angle)[:3, :3]
 
 
-def describe_cloud(points: np.ndarray, s: DescriptorSettings) -> CloudDescription | None:
+def describe_cloud(
+    points: np.ndarray, s: DescriptorSettings, lap: Callable[[str], None] | None = None
+) -> CloudDescription | None:
     """Reduce and describe a cloud given in an aligned camera frame; ``None`` when too small.
 
     The viewpoint is the origin. Normals come from the descriptors package
-    (oriented toward the origin).
+    (oriented toward the origin). ``lap`` (e.g. :meth:`StageClock.lap`) is called with ``"normals"`` once the
+    voxel grid and the normals are done, so a caller can time them apart from the descriptors.
     """
     from asmteach.plugins.detectors.cvfh.descriptors import (
         compute_crh,
@@ -184,6 +188,8 @@ def describe_cloud(points: np.ndarray, s: DescriptorSettings) -> CloudDescriptio
     normals, curv = estimate_normals_curvature(pts, s.normal_radius, np.zeros(3))
     ok = np.all(np.isfinite(normals), axis=1) & np.isfinite(curv)  # isolated points get no normal
     pts, normals, curv = pts[ok], normals[ok], curv[ok]
+    if lap is not None:
+        lap("normals")
     if len(pts) < s.min_points:
         return None
     try:
