@@ -416,6 +416,21 @@ CASES: list[Case] = [
          r"0001\.jpg: the JPEG is cut short"),
     Case("calibrate-board", "calibrate --board 7by5",
          lambda t: ["calibrate", "--images", str(t), "--out", str(t / "c.yaml"), "--board", "7by5"], 2, r"--board"),
+    # --- detect (its command is the cvfh plugin's; listed here so the table covers every command)
+    Case("detect-garbage-pcd", "detect in a garbage PCD file",
+         lambda t: ["detect", str(STRUCTURE), "--part", "a", "--cloud", str(write(t, "c.pcd", b"junk\x00\x01")),
+                    "--out", str(t / "d.json")], 2, r"c\.pcd: .*not a PCD"),
+    Case("detect-nan-cloud", "detect in a PCD whose points are all NaN",
+         lambda t: ["detect", str(STRUCTURE), "--part", "a", "--cloud", str(write(
+             t, "n.pcd", "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\n"
+             "POINTS 2\nDATA ascii\nnan nan nan\nnan nan nan\n")), "--out", str(t / "d.json")], 2,
+         r"n\.pcd holds no finite point"),
+    Case("detect-out-under-file", "detect --out under a file",
+         lambda t: ["detect", str(STRUCTURE), "--part", "a", "--cloud", str(write(t, "c.pcd", b"junk")),
+                    "--out", str(write(t, "f", "x") / "d.json")], 2, r"is a file"),
+    Case("detect-out-folder", "detect --out is a folder",
+         lambda t: ["detect", str(STRUCTURE), "--part", "a", "--cloud", str(write(t, "c.pcd", b"junk")),
+                    "--out", str(_mk(t / "o"))], 2, r"is a folder"),
     # --- library
     Case("library-out-folder", "library --out is a folder",
          lambda t: ["library", str(ROOT / "configs/parts/set1"), "--out", str(t)], 2, r"is a folder"),
