@@ -52,7 +52,15 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Detector, PartModel
 from asmteach.core.models import Detection, StrictModel, TablePlane, Vec3
 from asmteach.core.symmetry import part_symmetries
-from asmteach.plugins.detectors.cvfh.refine import ModelCloud, RefineSettings, Verdict, icp_refine, model_cloud, verify
+from asmteach.plugins.detectors.cvfh.refine import (
+    ModelCloud,
+    RefineSettings,
+    Verdict,
+    icp_refine,
+    model_cloud,
+    one_thread,
+    verify,
+)
 from asmteach.plugins.detectors.cvfh.resting import (
     disagreement,
     hull_twins,
@@ -321,7 +329,8 @@ class CvfhIcpDetector(Detector):
         tried = 0
         for cluster in plausible[: s.max_clusters]:
             tried += 1
-            got = self._detect_cluster(cluster, pts, prep, clock, table, eye)
+            with one_thread():  # one limit for the cluster's ~50 ICP calls, not a TBB re-sync around each
+                got = self._detect_cluster(cluster, pts, prep, clock, table, eye)
             if got.best is not None and (outcome.best is None or got.best.score > outcome.best.score):
                 outcome.best, outcome.details = got.best, got.details
             if got.closest is not None and (outcome.closest is None or got.closest.score > outcome.closest.score):
@@ -385,11 +394,15 @@ class CvfhIcpDetector(Detector):
         # on the table (a hypothesis 20 deg off still nearly touches it; a wrong one floats or sinks).
         sub = cluster[:: max(1, len(cluster) // 300)]
 
-        def prescore(h: tuple[int, np.ndarray, float]) -> float:
-            gap = abs(_support_gap(h[1], prep.model, table))
-            return _near_share(h[1], sub, prep.model, s.refine.icp_coarse_distance) - min(1.0, gap / 0.03)
+        def prescored(hs: list[tuple[int, np.ndarray, float]]) -> list[tuple[int, np.ndarray, float]]:
+            """``hs`` best pre-score first (a stable sort: ties keep their order)."""
+            # One distance query for every hypothesis: the per-call overhead was most of the matching step.
+            shares = _near_shares([h[1] for h in hs], sub, prep.model, s.refine.icp_coarse_distance)
+            score = [float(sh) - min(1.0, abs(_support_gap(h[1], prep.model, table)) / 0.03)
+                     for h, sh in zip(hs, shares, strict=True)]
+            return [hs[i] for i in sorted(range(len(hs)), key=lambda i: -score[i])]
 
-        scored = sorted(hyps, key=lambda h: -prescore(h))
+        scored = prescored(hyps)
         clock.lap("matching")
         context = pts[np.linalg.norm(pts - centroid, axis=1) < prep.diameter + 0.02]
         icp_in = _down(cluster, s.descriptors.voxel)
@@ -399,7 +412,7 @@ class CvfhIcpDetector(Detector):
         if best is None and len(prep.rests):
             rest = [(-1, T, yaw) for T, yaw in resting_hypotheses(
                 cluster, prep.model, prep.rests, table, eye, s.resting_yaws)]
-            scored = sorted(rest, key=lambda h: -prescore(h))
+            scored = prescored(rest)
             clock.lap("matching")
             best, closest2, info2 = self._rounds(scored, job, prep, clock, s.resting_rounds)
             if closest2 is not None and (closest is None or closest2.score > closest.score):
@@ -439,10 +452,12 @@ class CvfhIcpDetector(Detector):
         for first in range(0, min(len(scored), max_rounds * s.icp_candidates), s.icp_candidates):
             rounds += 1
             # Coarse ICP on a subsample for every candidate, fine ICP and verification for the best few.
+            batch = scored[first : first + s.icp_candidates]
+            Ts = [icp_refine(job.icp_sub, prep.model, T0, s.refine, fine=False) for _, T0, _ in batch]
             coarse = []
-            for view, T0, roll in scored[first : first + s.icp_candidates]:
-                T = icp_refine(job.icp_sub, prep.model, T0, s.refine, fine=False)
-                score = _near_share(T, job.icp_sub, prep.model, s.refine.inlier_distance)
+            shares = _near_shares(Ts, job.icp_sub, prep.model, s.refine.inlier_distance)
+            for (view, _, roll), T, share in zip(batch, Ts, shares, strict=True):
+                score = float(share)
                 if abs(_support_gap(T, prep.model, job.table)) > 2.0 * s.refine.support_tolerance:
                     score -= 1.0  # resting inside the table or floating: last in line
                 coarse.append((score, view, T, roll))
@@ -608,12 +623,19 @@ def _down(points: np.ndarray, voxel: float) -> np.ndarray:
     return np.asarray(to_o3d(points).voxel_down_sample(voxel).points)
 
 
-def _near_share(T_world_part: np.ndarray, points: np.ndarray, model: ModelCloud, dist: float) -> float:
+def _near_shares(Ts: list[np.ndarray], points: np.ndarray, model: ModelCloud, dist: float) -> np.ndarray:
+    """Share of ``points`` (world) within ``dist`` (metres) of the model surface at each pose ``T_world_part``.
+
+    One distance query for all poses (each point's distance is computed on its own, so the shares are the
+    ones separate queries give).
+    """
     import open3d as o3d
 
-    local = geometry.transform_points(geometry.invert(T_world_part), points)
+    if not Ts:
+        return np.zeros(0)
+    local = np.concatenate([geometry.transform_points(geometry.invert(T), points) for T in Ts])
     d = model.scene.compute_distance(o3d.core.Tensor(local.astype(np.float32))).numpy()
-    return float(np.mean(d < dist))
+    return np.mean((d < dist).reshape(len(Ts), -1), axis=1)
 
 
 def _support_gap(T_world_part: np.ndarray, model: ModelCloud, table: TablePlane) -> float:
