@@ -17,7 +17,10 @@ Printed per seed and as medians: robot seconds old / new and their ratio,
 robot seconds per kind, computer seconds per stage. Rows go to
 ``OUT/cycle_time.jsonl`` (one per seed), run folders to ``OUT/seed_N``.
 
-Run: .venv/bin/python benchmarks/cycle_time.py [--seeds 20] [--first-seed 1] [--execute 3] [--out DIR]
+``--go-on trapezoid`` executes (and re-checks) the old timing's plan instead, to pair the assembly outcome.
+
+Run: .venv/bin/python benchmarks/cycle_time.py [--seeds 20] [--first-seed 1] [--execute 3] [--go-on toppra]
+[--out DIR]
 """
 
 from __future__ import annotations
@@ -65,8 +68,9 @@ def _limit_ratios(plan: Any, robot: Any, acceleration: float) -> tuple[float, fl
 class _Pairing:
     """Wraps the assembly planner's ``to_plan``: the same steps timed both ways; the toppra plan goes on."""
 
-    def __init__(self) -> None:
+    def __init__(self, go_on: str = "toppra") -> None:
         self.calls: list[dict[str, Any]] = []
+        self.go_on = go_on  # the timing of the plan the pipeline goes on with
 
     def __call__(self, steps: Any, robot: Any, acceleration: float, **kw: Any) -> Any:
         row: dict[str, Any] = {}
@@ -79,16 +83,16 @@ class _Pairing:
             row[f"{timing}_max_v"], row[f"{timing}_max_a"] = _limit_ratios(plans[timing], robot, acceleration)
         row["blends"] = plans["toppra"].stats.get("blends")
         self.calls.append(row)
-        return plans["toppra"]
+        return plans[self.go_on]
 
 
 def _plan_only(*_: Any, **__: Any) -> Any:
     raise pipeline.StageFailed("not executed (the benchmark only plans this seed)")
 
 
-def run_seed(config: Path, seed: int, out: Path, execute: bool) -> dict[str, Any]:
-    """One seed: the pipeline with the pairing in place; returns the benchmark row."""
-    pairing = _Pairing()
+def run_seed(config: Path, seed: int, out: Path, execute: bool, go_on: str = "toppra") -> dict[str, Any]:
+    """One seed: the pipeline with the pairing in place (``go_on``: the timing executed); returns the row."""
+    pairing = _Pairing(go_on)
     original_to_plan, original_execute = regrasp_planner.to_plan, pipeline._execute
     regrasp_planner.to_plan = pairing
     if not execute:
@@ -98,7 +102,7 @@ def run_seed(config: Path, seed: int, out: Path, execute: bool) -> dict[str, Any
         report = pipeline.run_pipeline(cfg, out / f"seed_{seed}")
     finally:
         regrasp_planner.to_plan, pipeline._execute = original_to_plan, original_execute
-    row: dict[str, Any] = {"seed": seed, "executed": execute, "success": bool(report.success),
+    row: dict[str, Any] = {"seed": seed, "executed": execute, "go_on": go_on, "success": bool(report.success),
                            "failed_stage": report.failed_stage or "", "reason": (report.reason or "")[:160],
                            "computer_s": dict(report.computer_seconds), "robot_executed": dict(report.robot_seconds),
                            "recheck_collisions": report.metrics.get("plan_recheck_collisions"),
@@ -158,7 +162,8 @@ def report(rows: list[dict[str, Any]]) -> str:
     executed = [r for r in rows if r["executed"]]
     if executed:
         ok = sum(r["success"] for r in executed)
-        lines.append(f"executed with toppra: {ok} of {len(executed)} assembled; robot seconds executed "
+        timing = ", ".join(sorted({r.get("go_on", "toppra") for r in executed}))
+        lines.append(f"executed with {timing}: {ok} of {len(executed)} assembled; robot seconds executed "
                      + ", ".join(f"seed {r['seed']} {r['robot_executed'].get('total', 0):.1f}" for r in executed))
     return "\n".join(lines)
 
@@ -169,6 +174,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=20, help="number of seeds (default 20)")
     ap.add_argument("--first-seed", type=int, default=1)
     ap.add_argument("--execute", type=int, default=0, help="execute the first K seeds too (toppra timing)")
+    ap.add_argument("--go-on", choices=TIMINGS, default="toppra",
+                    help="the timing of the plan the pipeline goes on with (executes, re-checks)")
     ap.add_argument("--out", type=Path, default=None, help="folder for cycle_time.jsonl and the run folders")
     args = ap.parse_args(argv)
     out = args.out or Path(tempfile.mkdtemp(prefix="cycle_time_"))
@@ -183,12 +190,12 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for k, seed in enumerate(range(args.first_seed, args.first_seed + args.seeds)):
         execute = k < args.execute
-        if seed in done and done[seed]["executed"] == execute:
+        if seed in done and done[seed]["executed"] == execute and done[seed].get("go_on", "toppra") == args.go_on:
             rows.append(done[seed])
             continue
         t0 = time.perf_counter()
         try:
-            row = run_seed(args.config, seed, out, execute)
+            row = run_seed(args.config, seed, out, execute, args.go_on)
         except UserError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
