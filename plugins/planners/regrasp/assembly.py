@@ -132,6 +132,12 @@ class AssemblySettings(StrictModel):
         description="seconds per part: a wall-clock safety cap on the re-searches after max_attempts; when it "
         "cuts the search, the reason and wall_clock_cuts say so")
     acceleration: float = Field(2.0, gt=0.0, description="joint acceleration limit of the timed paths, rad/s^2")
+    timing: Literal["toppra", "trapezoid"] = Field(
+        "toppra",
+        description="time parametrisation of each motion: 'toppra' once through all its waypoints (corners blended "
+        "within 5 mrad, stops only at its ends), 'trapezoid' rest-to-rest at every waypoint (the old timing)")
+    insertion_speed: float = Field(
+        0.03, gt=0.0, le=0.2, description="TCP speed of the straight insertion with the toppra timing, m/s")
 
 
 @dataclass(frozen=True)

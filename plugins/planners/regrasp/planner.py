@@ -179,7 +179,8 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
             keyframes += [dict(k, part=key) for k in res.keyframes]
             stats[key] = res.stats
         stats["planning_seconds"] = round(time.perf_counter() - t0, 3)
-        plan = to_plan(steps, robot, self.settings.acceleration, keyframes=keyframes, stats=stats)
+        plan = to_plan(steps, robot, self.settings.acceleration, keyframes=keyframes, stats=stats,
+                       timing=self.settings.timing, insertion_speed=self.settings.insertion_speed)
         for seg, name in zip(plan.segments, owner, strict=True):  # one segment per step
             seg.part = name
         return plan
