@@ -21,10 +21,10 @@ from typing import Any
 from pydantic import Field
 
 from asmteach.core.config import load_run_config
-from asmteach.core.models import StrictModel
+from asmteach.core.models import RunReport, StrictModel
 from asmteach.core.sweep import Experiment
 
-__all__ = ["EndToEnd"]
+__all__ = ["EndToEnd", "report_row", "run_config_trial"]
 
 
 class EndToEndParams(StrictModel):
@@ -41,24 +41,40 @@ class EndToEnd(Experiment):
                     "plan_seconds", "robot_seconds")  # six at most: the computer's planning clock, the robot's clock
 
     def run_trial(self, params: EndToEndParams, seed: int, workdir: Path) -> dict[str, Any]:
-        from asmteach.core.pipeline import run_pipeline
-
-        cfg = load_run_config(self.path(params.run_config), overrides={**params.overrides, "seed": seed})
-        report = run_pipeline(cfg, Path(workdir) / "run")
-        row: dict[str, Any] = {"success": bool(report.success), "failed_stage": report.failed_stage or "",
-                               "reason": report.reason or ""}
-        for key in ("achieved_vs_taught_mm", "achieved_vs_taught_deg", "a_goal_error_mm", "plan_recheck_collisions"):
-            if key in report.metrics:
-                row[key] = report.metrics[key]
-        for stage in report.stages:
-            row[f"{stage.stage}_seconds"] = stage.seconds
-        # the robot's clock beside the computer's: simulated motion seconds executed, by kind, and the plan's
-        # own with the timing used and with the trapezoid on the same paths (issue 27)
-        for kind, seconds in report.robot_seconds.items():
-            row["robot_seconds" if kind == "total" else f"robot_{kind}_seconds"] = seconds
-        for key, name in (("robot_seconds", "plan_robot_seconds"),
-                          ("robot_seconds_trapezoid", "plan_robot_seconds_trapezoid")):
-            planned = report.plan_stats.get(key)
-            if isinstance(planned, dict) and "total" in planned:
-                row[name] = planned["total"]
+        _, row = run_config_trial(self.path(params.run_config), params.overrides, seed, workdir)
         return row
+
+
+def run_config_trial(run_config: Path, overrides: dict[str, Any], seed: int,
+                     workdir: Path) -> tuple[RunReport, dict[str, Any]]:
+    """Run the whole pipeline of ``run_config`` with ``seed`` into ``workdir/run``; return the report and its row.
+
+    ``overrides``: dotted config keys set before validation (as ``asmteach run --set``); the seed is set last.
+    Shared by the experiments that run whole pipelines (``end_to_end``, ``structures_corpus``).
+    """
+    from asmteach.core.pipeline import run_pipeline
+
+    cfg = load_run_config(run_config, overrides={**overrides, "seed": seed})
+    report = run_pipeline(cfg, Path(workdir) / "run")
+    return report, report_row(report)
+
+
+def report_row(report: RunReport) -> dict[str, Any]:
+    """A run report as one flat sweep row: outcome, errors (mm, deg), computer seconds per stage, robot seconds."""
+    row: dict[str, Any] = {"success": bool(report.success), "failed_stage": report.failed_stage or "",
+                           "reason": report.reason or ""}
+    for key in ("achieved_vs_taught_mm", "achieved_vs_taught_deg", "a_goal_error_mm", "plan_recheck_collisions"):
+        if key in report.metrics:
+            row[key] = report.metrics[key]
+    for stage in report.stages:
+        row[f"{stage.stage}_seconds"] = stage.seconds
+    # the robot's clock beside the computer's: simulated motion seconds executed, by kind, and the plan's
+    # own with the timing used and with the trapezoid on the same paths (issue 27)
+    for kind, seconds in report.robot_seconds.items():
+        row["robot_seconds" if kind == "total" else f"robot_{kind}_seconds"] = seconds
+    for key, name in (("robot_seconds", "plan_robot_seconds"),
+                      ("robot_seconds_trapezoid", "plan_robot_seconds_trapezoid")):
+        planned = report.plan_stats.get(key)
+        if isinstance(planned, dict) and "total" in planned:
+            row[name] = planned["total"]
+    return row
