@@ -189,6 +189,7 @@ def render_regrasp_graph(G: nx.Graph, path_nodes: Sequence[Any], out: Path, *, t
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.collections import LineCollection
 
     slots: list[str] = []
     for n, d in G.nodes(data=True):
@@ -215,24 +216,34 @@ def render_regrasp_graph(G: nx.Graph, path_nodes: Sequence[Any], out: Path, *, t
     chosen = set(zip([START, *path_nodes], [*path_nodes, GOAL], strict=True)) if path_nodes else set()
     chosen |= {(b, a) for a, b in chosen}
     styles = {"transfer": ("#9ecae1", "-"), "transit": ("#fdae6b", "--"), "virtual": ("#d9d9d9", ":")}
+    # One LineCollection per edge style, not one Line2D per edge: a graph has up to ~60 000 edges and
+    # creating and drawing that many artists took minutes of a trial; the picture is the same.
+    segments: dict[tuple[str, str], list[tuple[tuple[float, float], tuple[float, float]]]] = {}
     for a, b, d in G.edges(data=True):
         if (a, b) in chosen:
             continue
-        color, ls = styles.get(d["kind"], ("#cccccc", "-"))
-        ax.plot(*zip(pos[a], pos[b], strict=True), color=color, ls=ls, lw=0.5, alpha=0.6, zorder=1)
+        segments.setdefault(styles.get(d["kind"], ("#cccccc", "-")), []).append((pos[a], pos[b]))
+    for (color, ls), segs in segments.items():
+        ax.add_collection(LineCollection(segs, colors=color, linestyles=ls, linewidths=0.5, alpha=0.6, zorder=1))
     for a, b in chosen:
         if (b, a) in chosen and id(a) > id(b):
             continue
         ax.plot(*zip(pos[a], pos[b], strict=True), color="#d62728", lw=2.5, zorder=3)
     arm_colors = {"left": "#1f77b4", "right": "#2ca02c"}
+    # Nodes too: one scatter per (arm colour, on the path) group instead of one per node.
+    groups: dict[tuple[str, bool], list[tuple[float, float]]] = {}
+    on_path_nodes = set(path_nodes)
     for n in pos:
         if n in (START, GOAL):
             ax.scatter(*pos[n], s=160, c="k", marker="s", zorder=4)
             ax.annotate(n[0].lower(), pos[n], textcoords="offset points", xytext=(0, 10), ha="center")
             continue
-        on_path = n in path_nodes
-        ax.scatter(*pos[n], s=40 if on_path else 14, c=arm_colors.get(n[2], "#7f7f7f"),
+        groups.setdefault((arm_colors.get(n[2], "#7f7f7f"), n in on_path_nodes), []).append(pos[n])
+    for (color, on_path), xy in groups.items():
+        xs, ys = zip(*xy, strict=True)
+        ax.scatter(xs, ys, s=40 if on_path else 14, c=color,
                    edgecolors="#d62728" if on_path else "none", linewidths=1.5, zorder=5)
+    ax.autoscale_view()  # collections added with add_collection do not update the data limits by themselves
     ax.set_xticks(range(len(slots)))
     ax.set_xticklabels(slots, rotation=35, ha="right", fontsize=8)
     ax.set_yticks([])
