@@ -10,8 +10,9 @@ Reads the files in place (never copies them). Prints
 2. on ``real/aruco/choriginal.jpg`` (ChArUco 5x7 squares, 40 mm squares,
    20 mm markers, DICT_6X6_250) split four ways into two marker groups "A" and
    "B": the error of ``T_A_B`` against the printed layout for the teacher's
-   per-frame estimate (:func:`teacher_split`, default and real-photo edge
-   limits, and OpenCV sub-pixel corners) and for plain per-group
+   per-frame estimate (:func:`teacher_split` with default settings, whose
+   edge fit's line-RMS limit follows each marker's measured edge-point noise;
+   with the real-photo edge limits; with OpenCV sub-pixel corners) and for plain per-group
    ``cv2.solvePnP`` on OpenCV's corners;
 3. the ids found on the three ArUco photos.
 """
@@ -94,7 +95,7 @@ def marker_table(data: Path) -> list[str]:
     cam = load_camera(data / "real/aruco/tutorial_camera_charuco.yml")
     img = cv2.imread(str(data / "real/aruco/choriginal.jpg"))
     methods = {
-        "teacher, default edge limits": lambda t: teacher_split(img, cam, t),
+        "teacher, default settings (noise-adaptive line-RMS limit)": lambda t: teacher_split(img, cam, t),
         "teacher, real-photo edge limits (0.35 px, 0.6)": lambda t: teacher_split(img, cam, t, REAL_PHOTO),
         "teacher, OpenCV sub-pixel corners": lambda t: teacher_split(
             img, cam, t, ArucoTeacherSettings(corner_refinement="subpix")),

@@ -52,10 +52,12 @@ class ArucoTeacherSettings(StrictModel):
 
     corner_refinement: RefineMethod = Field("edges", description="edges: line fits to the marker's outer edges")
     edge_max_line_rms: float = Field(0.25, gt=0, description="edges: a marker side whose edge points scatter more "
-                                     "than this (pixels RMS) about its line is not trusted (marker dropped)")
+                                     "than this (pixels RMS) about its line, or more than 2.5 times the edge-point "
+                                     "noise measured on the marker's own sides if that is larger, is not trusted "
+                                     "(marker dropped)")
     edge_min_inliers: float = Field(0.85, gt=0, le=1, description="edges: fraction of a side's edge profiles that "
-                                    "must be clean steps; real JPEGs (noise, dark halos at edges) needed 0.35 px "
-                                    "and 0.6 (docs/results/real_sensor_data.md)")
+                                    "must be clean steps (docs/results/real_sensor_data.md, section 2: a real "
+                                    "JPEG's small markers fail this on some sides)")
     marker_reject_px: float = Field(1.0, gt=0, description="drop a marker whose RMS reprojection error exceeds this")
     frame_reject_px: float = Field(1.0, gt=0, description="drop a frame whose RMS reprojection error exceeds this")
     min_frames: int = Field(3, ge=1, description="assembled frames needed (both parts seen)")

@@ -64,14 +64,19 @@ def test_marker_groups_match_the_printed_layout_at_least_as_well_as_solvepnp(cha
     assert ours_m[0] <= base_m[0] and ours_m[1] <= base_m[1], (ours_m, base_m)
 
 
-def test_default_edge_limits_drop_most_markers_of_a_real_jpeg(charuco_photo) -> None:
-    # The default limits suit clean renders; on this JPEG (noise, sharpening halos) they keep only a few markers
-    # and a one-marker group is then off by centimetres: the reason REAL_PHOTO exists.
+def test_default_settings_match_the_printed_layout_better_than_solvepnp(charuco_photo) -> None:
+    # With default settings the edge fit's line-RMS limit follows the edge-point noise measured on each marker
+    # (this JPEG: 0.15-0.33 px on clean edges). A fixed 0.25 px kept 6 of 17 markers here and left a group with
+    # one marker, 10 mm off: 5.64 mm, 1.40 deg mean against solvePnP's 1.33 mm, 0.87 deg.
     img, cam, tasks = charuco_photo
-    task, T_true = tasks["top/bottom"]
-    est = teacher_split(img, cam, task)
-    assert len(est.markers_a) + len(est.markers_b) < 10
-    assert teacher_split(img, cam, task, REAL_PHOTO).errors(T_true)[0] < est.errors(T_true)[0]
+    ours, base = [], []
+    for name, (task, T_true) in tasks.items():
+        est = teacher_split(img, cam, task)
+        assert len(est.markers_a) >= 3 and len(est.markers_b) >= 4 and est.rms_px < 0.4, name
+        ours.append(est.errors(T_true))
+        base.append(solvepnp_split(img, cam, task).errors(T_true))
+    ours_m, base_m = np.mean(ours, axis=0), np.mean(base, axis=0)
+    assert ours_m[0] <= base_m[0] and ours_m[1] <= base_m[1], (ours_m, base_m)
 
 
 def _printed_id(grey: np.ndarray, corners: np.ndarray, dictionary: str) -> int | None:
@@ -112,9 +117,13 @@ def test_ids_on_real_photos_are_the_printed_ones(real_data: Path, photo: str, di
     # Each id is what is printed: the cells read straight from the photo give the same dictionary entry.
     for (_, mid), corners in found.items():
         assert _printed_id(grey, corners, dictionary) == mid
-    # Edge-fitted corners with the real-photo limits keep only ids the coarse detection found.
+    # Edge-fitted corners (the real-photo limits; the defaults, whose line-RMS limit follows the measured edge
+    # noise) keep only ids the coarse detection found, and their corners stay on the coarse ones.
     edges = MarkerDetector([dictionary], edge_max_line_rms=0.35, edge_min_inliers=0.6).detect(img)
     assert {k[1] for k in edges} <= ids and len(edges) >= 0.5 * len(ids)
+    default = MarkerDetector([dictionary]).detect(img)
+    assert {k[1] for k in default} <= ids and len(default) >= 0.3 * len(ids)
+    assert all(np.abs(c - found[k]).max() < 2.0 for k, c in default.items())
 
 
 def test_screen_charuco_ids_sit_where_the_board_layout_puts_them(real_data: Path) -> None:

@@ -58,6 +58,27 @@ def test_edge_refinement_rejects_a_marker_whose_quiet_zone_is_hidden() -> None:
     assert refine_corners_edges(_square_image(x0, y0, side, 2.0), rough, cells=6) is None
 
 
+def test_edge_refinement_limit_follows_the_measured_edge_noise() -> None:
+    # A small marker in a noisy image: its straight edges scatter about their lines by the image's noise. With a
+    # 0.05 px line-RMS floor alone every one is dropped; the limit raised to 2.5 times the edge-point noise
+    # measured on the marker's own sides keeps the clean ones, and their corners stay right.
+    x0, y0, side = 20.3, 18.6, 24.0
+    truth = np.array([[x0, y0], [x0 + side, y0], [x0 + side, y0 + side], [x0, y0 + side]])
+    rough = truth + np.array([[0.3, -0.2], [-0.2, 0.3], [0.2, 0.2], [-0.3, -0.1]])
+    h, w = 60, 70
+    inside = np.outer(_coverage(y0, y0 + side, h), _coverage(x0, x0 + side, w))
+    clean = cv2.GaussianBlur((210.0 + (25.0 - 210.0) * inside).astype(np.float32), (0, 0), 0.7)
+    floor_only, adaptive = 0, []
+    for seed in range(10):
+        img = (clean + np.random.default_rng(seed).normal(0.0, 8.0, clean.shape)).astype(np.float32)
+        floor_only += refine_corners_edges(img, rough, cells=8, max_line_rms=0.05, noise_factor=0.0) is not None
+        refined = refine_corners_edges(img, rough, cells=8, max_line_rms=0.05)
+        if refined is not None:
+            adaptive.append(float(np.abs(refined - truth).max()))
+    assert floor_only == 0
+    assert len(adaptive) >= 5 and max(adaptive) < 0.2, adaptive
+
+
 def _obs(marker_id: int, size: float, T_part_marker: np.ndarray, T_cam_part: np.ndarray, K: np.ndarray,
          dist: np.ndarray, rng: np.random.Generator) -> MarkerObservation:
     o = MarkerObservation(marker_id, size, T_part_marker, np.zeros((4, 2)))
