@@ -258,6 +258,7 @@ def _plot(trials: list[dict[str, Any]], path: Path) -> Path:
     import numpy as np
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
 
     from asmteach.core.io import atomic_path
     from asmteach.core.structure_corpus import STRUCTURE_FAMILIES
@@ -287,6 +288,7 @@ def _plot(trials: list[dict[str, Any]], path: Path) -> Path:
         bottom += k
     ax2.set_xticks(x, families, rotation=40, ha="right", fontsize=8)
     ax2.set_ylabel("failed trials")
+    ax2.yaxis.set_major_locator(MaxNLocator(integer=True))  # counts of trials
     ax2.set_title("failure causes by family")
     if causes:
         ax2.legend(fontsize=7)
