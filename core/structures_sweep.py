@@ -82,7 +82,9 @@ def failure_cause(stage: str, reason: str) -> str:
     if "topple" in text or "tipped over" in text:
         return "topple"
     if "jam" in text:
-        return "jam"
+        # the pipeline says "<part> was pushed N mm in the hand by '<motion>' (... a jam, if that is the
+        # insertion)": a jam only when the motion is an insertion; pushed while placing A is A put off its goal
+        return "jam" if "by 'insert" in text or "pushed" not in text else "off_goal"
     if stage in _DETECT_STAGES:
         if "ambiguous" in text:
             return "detect_ambiguous"
@@ -184,6 +186,10 @@ def _trial_record(row: dict[str, Any]) -> dict[str, Any]:
         error = " ".join(str(row.get("error") or "the trial raised").split())
         m = {"family": point.get("family", "?"), "structure": f"{point.get('family', '?')}[{point.get('index', '?')}]",
              "success": False, "failed_stage": "trial", "reason": error, "cause": "other", "cause_named": True}
+    elif not m.get("success"):
+        # classified again from the report's reason: a sharper classifier applies to the rows logged before it
+        m["cause"] = failure_cause(m.get("failed_stage", ""), m.get("reason", ""))
+        m["cause_named"] = cause_named(m.get("failed_stage", ""), m.get("reason", ""))
     m["seed"] = row.get("seed")
     return m
 

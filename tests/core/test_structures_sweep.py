@@ -31,6 +31,15 @@ REAL_REASONS = [
     ("measure", "assembled outside tolerance: B in A off by 0.65 mm / 2.55 deg (limits 2.0 mm / 2.0 deg), A 1.52 mm "
      "from its goal (limit 3.0 mm); round_peg was pushed 7.5 mm in the hand by 'insert round_peg at assembled' (it "
      "met resistance there: a jam, if that is the insertion)", "jam"),
+    ("measure", "assembled outside tolerance: B in A off by 83.51 mm / 5.18 deg (limits 2.0 mm / 2.0 deg), A 82.53 mm "
+     "from its goal (limit 3.0 mm); t_slot_stopped_block was pushed 2.3 mm in the hand by 'place t_slot_stopped_block "
+     "at goal' (it met resistance there: a jam, if that is the insertion)", "off_goal"),
+    ("plan", "part B (round_side_pin): 40 keyframe sequences tried (max_attempts); last failure: insertion at "
+     "assembled: collision at step 9 (LARM_FINGER0_Link/side_holed_block, LARM_FINGER1_Link/side_holed_block)",
+     "motion"),
+    ("plan", "part B (round_side_pin): no grasp is shared between the start and goal layers, even through "
+     "intermediate placements; last motion failure: insertion at assembled: collision at step 10 "
+     "(RARM_FINGER1_Link/side_holed_block)", "regrasp_graph"),
     ("teach", "internal error (ValueError: no viewing direction shows markers of both parts)", "teach"),
     ("grasps", "no force-closure grasp of u_bracket for this hand", "no_grasp"),
     ("plan", "hex_peg: no grasp is feasible at the start pose (IK or collision)", "no_grasp"),
