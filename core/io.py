@@ -29,6 +29,7 @@ __all__ = [
     "check_out_dir",
     "check_out_file",
     "describe_os_error",
+    "pid_alive",
     "read_jsonl",
     "read_yaml",
     "run_folder",
@@ -129,7 +130,8 @@ def _owner(folder: Path, marker: str, key: tuple[str, ...]) -> str | None:
         return ""  # files, but no readable marker: someone else's, or a torn run of an old version
 
 
-def _pid_alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists (one we may not signal counts as alive)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -156,7 +158,7 @@ def run_folder(out: str | os.PathLike[str], name: str, *, force: bool = False, m
     target = check_out_dir(out)
     for stale in [*target.glob(".partial-*"), *target.glob(".replaced-*")]:  # left by a run killed with -9
         with contextlib.suppress(ValueError):
-            if not _pid_alive(int(stale.name.rsplit("-", 1)[1])):
+            if not pid_alive(int(stale.name.rsplit("-", 1)[1])):
                 shutil.rmtree(stale, ignore_errors=True)
     owner = _owner(target, marker, key)
     if owner == "":

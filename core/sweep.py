@@ -57,6 +57,7 @@ from asmteach.core.io import (
     append_jsonl,
     atomic_path,
     check_out_dir,
+    pid_alive,
     read_jsonl,
     read_yaml,
     to_jsonable,
@@ -448,16 +449,6 @@ def _run_serial(args: list[tuple[Any, ...]], log_path: Path, bar: _Bar, interrup
         raise KeyboardInterrupt
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def _die_with_parent(parent: int) -> None:
     """End this worker when the sweep process ``parent`` dies, so a sweep killed with -9 leaves none running.
 
@@ -475,12 +466,12 @@ def _die_with_parent(parent: int) -> None:
         except (OSError, AttributeError):  # no prctl: the watching thread below does it
             pass
         else:
-            if not _pid_alive(parent):  # the sweep died before the request was made
+            if not pid_alive(parent):  # the sweep died before the request was made
                 os._exit(1)
             return
 
     def watch() -> None:
-        while _pid_alive(parent):
+        while pid_alive(parent):
             time.sleep(0.5)
         os._exit(1)
 

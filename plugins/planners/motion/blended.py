@@ -66,7 +66,7 @@ import toppra.algorithm
 import toppra.constraint
 
 from asmteach.core.errors import UserError
-from asmteach.plugins.planners.motion.timing import TimedPath, time_parametrize
+from asmteach.plugins.planners.motion.timing import TimedPath, joint_limits, time_parametrize
 
 __all__ = ["DEFAULT_DEVIATION", "BlendReport", "BlendedPath", "time_optimal"]
 
@@ -324,14 +324,6 @@ def _concat(parts: Sequence[TimedPath]) -> TimedPath:
                      accelerations=np.vstack(acc), waypoint_index=np.concatenate(idx))
 
 
-def _limits(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
-    arr = np.asarray(value, dtype=float)
-    arr = np.full(dof, float(arr)) if arr.ndim == 0 else arr.reshape(-1)
-    if arr.shape != (dof,) or not np.all(np.isfinite(arr)) or not np.all(arr > 0):
-        raise UserError(f"time parametrisation: {name} must be {dof} finite values > 0 (got {np.asarray(value)!r})")
-    return arr
-
-
 def time_optimal(
     path: np.ndarray,
     v_max: float | np.ndarray,
@@ -365,7 +357,7 @@ def time_optimal(
     if path_speed is not None and not path_speed > 0:
         raise UserError(f"time parametrisation: path_speed must be > 0 rad/s (got {path_speed})")
     dof = pts.shape[1]
-    vel, acc = _limits(v_max, dof, "v_max"), _limits(a_max, dof, "a_max")
+    vel, acc = joint_limits(v_max, dof, "v_max"), joint_limits(a_max, dof, "a_max")
     report = report if report is not None else BlendReport()
     # Repeated waypoints carry no motion; keep the first of each run (their stops move to it).
     keep = np.concatenate([[True], np.linalg.norm(np.diff(pts, axis=0), axis=1) > 1e-12])

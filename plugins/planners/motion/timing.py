@@ -28,7 +28,7 @@ import numpy as np
 from asmteach.core.errors import UserError
 from asmteach.core.models import Trajectory
 
-__all__ = ["TimedPath", "segment_profile", "time_parametrize", "to_trajectory"]
+__all__ = ["TimedPath", "joint_limits", "segment_profile", "time_parametrize", "to_trajectory"]
 
 
 @dataclass
@@ -90,7 +90,8 @@ def _profile_at(t: np.ndarray, duration: float, sd: float, sdd: float) -> tuple[
     return np.clip(s, 0.0, 1.0), v, a
 
 
-def _limits(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
+def joint_limits(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
+    """``value`` (one number or one per joint) as ``(dof,)`` positive finite limits; :class:`UserError` otherwise."""
     arr = np.asarray(value, dtype=float)
     arr = np.full(dof, float(arr)) if arr.ndim == 0 else arr.reshape(-1)
     if arr.shape != (dof,) or not np.all(np.isfinite(arr)) or not np.all(arr > 0):
@@ -116,8 +117,8 @@ def time_parametrize(
     if not rate_hz > 0:
         raise UserError(f"time parametrisation: rate_hz must be > 0 (got {rate_hz})")
     dof = pts.shape[1]
-    vel = _limits(v_max, dof, "v_max")
-    acc = _limits(a_max, dof, "a_max")
+    vel = joint_limits(v_max, dof, "v_max")
+    acc = joint_limits(a_max, dof, "a_max")
     times = [np.zeros(1)]
     pos = [pts[:1]]
     vels = [np.zeros((1, dof))]
