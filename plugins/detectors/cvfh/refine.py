@@ -42,7 +42,7 @@ instead (:func:`~asmteach.plugins.detectors.cvfh.resting.near_twins`).
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 
@@ -66,6 +66,7 @@ __all__ = [
     "model_cloud",
     "one_thread",
     "ray_depths",
+    "ray_plane",
     "surface_check",
     "verify",
 ]
@@ -336,6 +337,23 @@ class SurfaceCheck:
         return self.seen_through / judged if judged > 0 else 1.0
 
 
+def ray_plane(direction: np.ndarray) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
+    """The unit ``axis`` along ``direction`` and the map of rays to a plane 1 m along it.
+
+    ``plane(u)`` takes ``(n, 3)`` ray directions from the eye (any length, ahead of it) to ``(n, 2)``
+    points where they cross the plane ``axis . x = 1`` (metres), so rays close in angle are close there.
+    """
+    axis = np.asarray(direction, dtype=float) / np.linalg.norm(direction)
+    e1 = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    basis = np.column_stack([e1, np.cross(axis, e1)])
+
+    def plane(u: np.ndarray) -> np.ndarray:
+        return (u @ basis) / (u @ axis)[:, None]
+
+    return axis, plane
+
+
 def surface_check(
     T_part_world: np.ndarray,
     context: np.ndarray,
@@ -362,16 +380,7 @@ def surface_check(
     if len(vis) == 0 or len(context) == 0:
         return SurfaceCheck(len(vis), 0, 0, 0, len(vis))
     # Rays as points of a plane one metre in front of the eye, facing the part: nearest ray = nearest pixel.
-    axis = model.center - eye
-    axis /= np.linalg.norm(axis)
-    e1 = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(axis, e1)
-    basis = np.column_stack([e1, e2])
-
-    def plane(u: np.ndarray) -> np.ndarray:
-        return (u @ basis) / (u @ axis)[:, None]
-
+    axis, plane = ray_plane(model.center - eye)
     obs = geometry.transform_points(T_part_world, context) - eye
     obs_dist = np.linalg.norm(obs, axis=1)
     ahead = obs @ axis > 0

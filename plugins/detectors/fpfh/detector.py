@@ -33,6 +33,7 @@ from asmteach.plugins.detectors.cvfh.refine import (
     icp_refine,
     model_cloud,
     one_thread,
+    ray_plane,
     verify,
 )
 from asmteach.plugins.detectors.cvfh.segment import (
@@ -314,15 +315,7 @@ def _along_rays(points: np.ndarray, context: np.ndarray, eye: np.ndarray, s: Ref
 
     if len(points) == 0 or len(context) == 0:
         return 0.0, 1.0
-    axis = points.mean(axis=0) - eye
-    axis /= np.linalg.norm(axis)
-    e1 = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    basis = np.column_stack([e1, np.cross(axis, e1)])
-
-    def plane(u: np.ndarray) -> np.ndarray:
-        return (u @ basis) / (u @ axis)[:, None]
-
+    axis, plane = ray_plane(points.mean(axis=0) - eye)
     obs = context - eye
     obs = obs[obs @ axis > 0]
     if len(obs) == 0:
