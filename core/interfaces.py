@@ -21,6 +21,7 @@ from typing import Any, ClassVar
 import numpy as np
 import trimesh
 
+from asmteach.core.failures import FailureKind
 from asmteach.core.models import (
     AssemblyTask,
     CameraIntrinsics,
@@ -219,6 +220,8 @@ class MotionResult:
     path: np.ndarray | None = None
     reason: str | None = None
     stats: dict[str, Any] = field(default_factory=dict)
+    kind: FailureKind | None = None
+    """Why it failed (None on success): callers branch on this, ``reason`` is for people."""
 
 
 class MotionPlanner(Plugin):
