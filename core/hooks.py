@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import argparse
 import logging
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 import pluggy
+
+from asmteach.core.registry import distribution, entry_points
 
 __all__ = ["PROJECT", "hookimpl", "hookspec", "make_plugin_manager"]
 
@@ -62,8 +63,9 @@ class Specs:
         """
 
     @hookspec(firstresult=True)
-    def asmteach_measure_part(self, part: Any, stage: str, seed: int, workdir: Path,
-                              options: dict[str, Any]) -> dict[str, Any] | None:
+    def asmteach_measure_part(
+        self, part: Any, stage: str, seed: int, workdir: Path, options: dict[str, Any]
+    ) -> dict[str, Any] | None:
         """Measure ``stage`` on ``part`` for the ``part_corpus`` experiment; ``None`` when not this plugin's stage.
 
         :param stage: ``"placements"``, ``"grasps"`` or ``"detection"``.
@@ -90,9 +92,8 @@ def hook_errors() -> dict[str, tuple[str, str, str | None]]:
 def _load_entry_point_hooks(pm: pluggy.PluginManager) -> None:
     """Like ``load_setuptools_entrypoints`` but one broken plugin does not stop the rest."""
     _HOOK_STATUS.clear()
-    for ep in sorted(metadata.entry_points(group=PROJECT + ".hooks"), key=lambda e: e.name):
-        dist = ep.dist
-        ident = (dist.metadata["Name"] if dist else "?", dist.version if dist else "?")
+    for ep in entry_points(PROJECT + ".hooks"):
+        ident = distribution(ep)
         if pm.get_plugin(ep.name) is not None or pm.is_blocked(ep.name):
             continue
         try:

@@ -16,7 +16,17 @@ from typing import Any
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import ROLES, Plugin
 
-__all__ = ["PluginInfo", "closest", "create", "discover", "get_class", "group_name"]
+__all__ = [
+    "PluginInfo",
+    "closest",
+    "create",
+    "discover",
+    "distribution",
+    "entry_points",
+    "get_class",
+    "group_name",
+    "load_named",
+]
 
 GROUP_PREFIX = "asmteach."
 
@@ -39,8 +49,41 @@ class PluginInfo:
     error: str | None = None
 
 
-def _entry_points(role: str) -> list[metadata.EntryPoint]:
-    return sorted(metadata.entry_points(group=group_name(role)), key=lambda ep: ep.name)
+def entry_points(group: str) -> list[metadata.EntryPoint]:
+    """The entry points of one whole group name (``"asmteach.hooks"``), sorted by name.
+
+    The one place the project reads entry points: plugin roles, hook plugins and
+    experiment kinds all go through it.
+    """
+    return sorted(metadata.entry_points(group=group), key=lambda ep: ep.name)
+
+
+def distribution(ep: metadata.EntryPoint) -> tuple[str, str]:
+    """``(name, version)`` of the package that registered ``ep`` (``"?"`` when unknown)."""
+    dist = ep.dist
+    return (dist.metadata["Name"], dist.version) if dist is not None else ("?", "?")
+
+
+def load_named(group: str, name: str, base: type, what: str) -> type:
+    """The class registered as ``name`` in ``group``, a subclass of ``base``.
+
+    ``what`` names the kind of thing in the one-line :class:`UserError` raised when
+    the name is unknown (with the closest known name), fails to import, or is not a
+    ``base`` subclass.
+    """
+    eps = {ep.name: ep for ep in entry_points(group)}
+    if name not in eps:
+        hint = closest(name, list(eps))
+        known = ", ".join(sorted(eps)) or "none installed"
+        suggestion = f"; did you mean {hint!r}?" if hint else f" (known: {known})"
+        raise UserError(f"no {what} named {name!r}{suggestion}")
+    try:
+        cls = eps[name].load()
+    except Exception as exc:
+        raise UserError(f"{what} {name!r} ({eps[name].value}) failed to import: {type(exc).__name__}: {exc}") from exc
+    if not (isinstance(cls, type) and issubclass(cls, base)):
+        raise UserError(f"{what} {name!r} ({eps[name].value}) is not a {base.__name__} subclass")
+    return cls
 
 
 def discover(role: str | None = None, *, load: bool = True) -> list[PluginInfo]:
@@ -50,15 +93,9 @@ def discover(role: str | None = None, *, load: bool = True) -> list[PluginInfo]:
     for r in roles:
         if r not in ROLES:
             raise UserError(f"unknown plugin role {r!r}; roles are {', '.join(ROLES)}")
-        for ep in _entry_points(r):
-            dist = ep.dist
-            info = PluginInfo(
-                role=r,
-                name=ep.name,
-                value=ep.value,
-                distribution=dist.metadata["Name"] if dist is not None else "?",
-                version=dist.version if dist is not None else "?",
-            )
+        for ep in entry_points(group_name(r)):
+            dist_name, version = distribution(ep)
+            info = PluginInfo(role=r, name=ep.name, value=ep.value, distribution=dist_name, version=version)
             if load:
                 try:
                     cls = ep.load()
@@ -81,19 +118,7 @@ def get_class(role: str, name: str) -> type[Plugin]:
     """Load the plugin class ``name`` of ``role``; :class:`UserError` if unknown or broken."""
     if role not in ROLES:
         raise UserError(f"unknown plugin role {role!r}; roles are {', '.join(ROLES)}")
-    eps = {ep.name: ep for ep in _entry_points(role)}
-    if name not in eps:
-        hint = closest(name, list(eps))
-        known = ", ".join(sorted(eps)) or "none installed"
-        suggestion = f"; did you mean {hint!r}?" if hint else f" (known: {known})"
-        raise UserError(f"no {role[:-1].replace('_', ' ')} plugin named {name!r}{suggestion}")
-    try:
-        cls = eps[name].load()
-    except Exception as exc:
-        raise UserError(f"plugin {name!r} ({eps[name].value}) failed to import: {type(exc).__name__}: {exc}") from exc
-    if not (isinstance(cls, type) and issubclass(cls, ROLES[role])):
-        raise UserError(f"plugin {name!r} ({eps[name].value}) is not a {ROLES[role].__name__}")
-    return cls
+    return load_named(group_name(role), name, ROLES[role], f"{role[:-1].replace('_', ' ')} plugin")
 
 
 def create(role: str, name: str, settings: dict[str, Any] | None = None, *, seed: int = 0) -> Plugin:
