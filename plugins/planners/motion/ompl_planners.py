@@ -20,10 +20,10 @@ import numpy as np
 from ompl import base as ob
 from ompl import geometric as og
 
+from asmteach.core.failures import FailureKind
 from asmteach.core.interfaces import MotionPlanner, MotionResult
 from asmteach.plugins.planners.motion.batch import batch_of
 from asmteach.plugins.planners.motion.query import (
-    FailureKind,
     MotionSettings,
     check_query,
     default_range,

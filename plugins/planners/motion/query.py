@@ -1,14 +1,13 @@
 """What every joint-space planner here shares: settings, typed failures, query checks.
 
 A failed :class:`~asmteach.core.interfaces.MotionResult` carries a readable
-``reason`` (e.g. ``"start in collision"``, ``"timeout after 5.0 s"``) and the
-typed kind in ``stats["failure"]`` (a :class:`FailureKind`, a ``str`` enum), so
-callers branch on the kind and print the reason.
+``reason`` (e.g. ``"start in collision"``, ``"timeout after 5.0 s"``) and its
+typed ``kind`` (a :class:`~asmteach.core.failures.FailureKind`), so callers
+branch on the kind and print the reason.
 """
 
 from __future__ import annotations
 
-import enum
 import math
 from collections.abc import Callable
 from typing import Any
@@ -17,6 +16,7 @@ import numpy as np
 from pydantic import Field
 
 from asmteach.core.errors import UserError
+from asmteach.core.failures import FailureKind
 from asmteach.core.interfaces import MotionResult
 from asmteach.core.models import StrictModel
 from asmteach.plugins.planners.motion.interpolate import densify
@@ -24,7 +24,6 @@ from asmteach.plugins.planners.motion.shortcut import SegmentChecker, shorten
 from asmteach.plugins.planners.motion.space import JointSpace
 
 __all__ = [
-    "FailureKind",
     "MotionSettings",
     "check_query",
     "default_range",
@@ -32,18 +31,6 @@ __all__ = [
     "finish_path",
     "shorten_batched",
 ]
-
-
-class FailureKind(enum.StrEnum):
-    """Why a motion query failed."""
-
-    START_OUT_OF_BOUNDS = "start out of joint limits"
-    GOAL_OUT_OF_BOUNDS = "goal out of joint limits"
-    START_INVALID = "start in collision"
-    GOAL_INVALID = "goal in collision"
-    TIMEOUT = "timeout"
-    ITERATIONS = "iteration limit"
-    NO_SOLUTION = "no solution"
 
 
 class MotionSettings(StrictModel):
@@ -79,7 +66,7 @@ class MotionSettings(StrictModel):
 def failure(kind: FailureKind, detail: str = "", **stats: Any) -> MotionResult:
     """A failed :class:`MotionResult` of ``kind``; ``detail`` is appended to the reason."""
     reason = f"{kind.value} {detail}".strip()
-    return MotionResult(success=False, path=None, reason=reason, stats={"failure": kind, **stats})
+    return MotionResult(success=False, path=None, reason=reason, stats=dict(stats), kind=kind)
 
 
 def check_query(

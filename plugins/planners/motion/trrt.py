@@ -58,11 +58,11 @@ import numpy as np
 from pydantic import Field
 from scipy.spatial import cKDTree
 
+from asmteach.core.failures import FailureKind
 from asmteach.core.interfaces import MotionPlanner, MotionResult
 from asmteach.plugins.planners.motion.batch import Batched
 from asmteach.plugins.planners.motion.interpolate import densify
 from asmteach.plugins.planners.motion.query import (
-    FailureKind,
     MotionSettings,
     check_query,
     default_range,

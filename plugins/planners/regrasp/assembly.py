@@ -39,13 +39,13 @@ import networkx as nx
 import numpy as np
 from pydantic import Field
 
+from asmteach.core.failures import FailureKind
 from asmteach.core.geometry import compose, from_rotation, rot_z
 from asmteach.core.interfaces import MotionPlanner, Obstacle, PartModel, Robot
 from asmteach.core.models import Grasp, GripperEvent, Placement, StrictModel
 from asmteach.plugins.planners.grasps.hand_geometry import MeshCollider
 from asmteach.plugins.planners.motion.batch import batched
 from asmteach.plugins.planners.motion.interpolate import densify
-from asmteach.plugins.planners.motion.query import FailureKind
 from asmteach.plugins.planners.motion.trrt import inverse_clearance_cost
 from asmteach.plugins.planners.regrasp.feasibility import (
     ScreenSettings,
@@ -768,9 +768,8 @@ def _free(
     if not res.success or res.path is None:
         # The goal configuration itself is in collision (a held part against the robot, say): no motion
         # to it can succeed, whatever edge leads there.
-        bad_goal = edge[1] if str(res.reason).startswith(FailureKind.GOAL_INVALID.value) else None
-        raise _MotionFailure(edge, f"{what}: {res.reason}", node=bad_goal,
-                             timed_out=res.stats.get("failure") == FailureKind.TIMEOUT)
+        bad_goal = edge[1] if res.kind is FailureKind.GOAL_INVALID else None
+        raise _MotionFailure(edge, f"{what}: {res.reason}", node=bad_goal, timed_out=res.kind is FailureKind.TIMEOUT)
     path = np.asarray(res.path, float)
     # clearance of the free motion in the world it was planned in, every 0.05 rad (for the statistics)
     clearances.append(float(np.min(robot.clearance(arm, densify(path, 0.05)))))

@@ -7,10 +7,10 @@ import pytest
 
 from asmteach.core import registry
 from asmteach.core.errors import UserError
+from asmteach.core.failures import FailureKind
 from asmteach.core.interfaces import MotionPlanner
 from asmteach.plugins.planners.motion.interpolate import densify
 from asmteach.plugins.planners.motion.ompl_planners import RRTConnectPlanner
-from asmteach.plugins.planners.motion.query import FailureKind
 from asmteach.plugins.planners.motion.toyworld import Box, JointWorld
 from asmteach.plugins.planners.motion.trrt import TRRTPlanner, inverse_clearance_cost
 
@@ -69,7 +69,7 @@ def test_start_goal_in_collision_and_out_of_bounds(planner_cls: type[MotionPlann
     for q0, q1, kind, text in cases:
         result = planner.plan(q0, q1, **kw)
         assert not result.success and result.path is None
-        assert result.stats["failure"] is kind
+        assert result.kind is kind
         assert result.reason.startswith(text)
     with pytest.raises(UserError, match="start must be 2 finite"):
         planner.plan(np.zeros(3), goal, **kw)
@@ -86,7 +86,7 @@ def test_timeout_is_reported(planner_cls: type[MotionPlanner]) -> None:
         np.array([-1.0, 0.0]), np.array([1.0, 0.0]), lower=lower, upper=upper, is_valid=world.is_valid, time_limit=0.3
     )
     assert not result.success
-    assert result.stats["failure"] is FailureKind.TIMEOUT
+    assert result.kind is FailureKind.TIMEOUT
     assert result.reason.startswith("timeout after 0.3 s")
 
 
@@ -95,7 +95,7 @@ def test_trrt_iteration_limit(passage2d) -> None:
     result = TRRTPlanner({"max_iterations": 20}, seed=0).plan(
         start, goal, lower=world.lower, upper=world.upper, is_valid=world.is_valid
     )
-    assert not result.success and result.stats["failure"] is FailureKind.ITERATIONS
+    assert not result.success and result.kind is FailureKind.ITERATIONS
     assert result.stats["iterations"] == 20
 
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from asmteach.core.failures import FailureKind
 from asmteach.plugins.planners.motion.batch import batched
 from asmteach.plugins.planners.motion.interpolate import densify
 from asmteach.plugins.planners.motion.ompl_planners import RRTConnectPlanner
-from asmteach.plugins.planners.motion.query import FailureKind
 from asmteach.plugins.planners.motion.toyworld import Box, JointWorld, narrow_passage
 from asmteach.plugins.planners.motion.trrt import TRRTPlanner, inverse_clearance_cost
 
@@ -112,7 +112,7 @@ def test_failure_reports_how_close_the_trees_came() -> None:
     lower, upper = -np.pi * np.ones(2), np.pi * np.ones(2)
     world = JointWorld(lower, upper, [Box(np.zeros(2), np.array([0.1, np.pi]))])
     res = TRRTPlanner(seed=0).plan(np.array([-1.0, 0.0]), np.array([1.0, 0.0]), **vectorised(world), time_limit=0.3)
-    assert not res.success and res.stats["failure"] is FailureKind.TIMEOUT
+    assert not res.success and res.kind is FailureKind.TIMEOUT
     # The closed wall is 0.2 rad thick, so the two trees stay at least that far apart.
     assert res.stats["tree_gap"] >= 0.2 - 1e-9
 

@@ -189,9 +189,9 @@ class TimesOut:
     """Motion planner double: every query cut by its wall-clock limit."""
 
     def plan(self, start: np.ndarray, goal: np.ndarray, **_: object) -> MotionResult:
-        from asmteach.plugins.planners.motion.query import FailureKind, failure
+        from asmteach.core.failures import FailureKind
 
-        return failure(FailureKind.TIMEOUT, "after 5.0 s")
+        return MotionResult(False, reason="timeout after 5.0 s", kind=FailureKind.TIMEOUT)
 
 
 def test_re_searches_are_counted_and_wall_clock_cuts_reported(peg) -> None:
