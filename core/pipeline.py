@@ -15,7 +15,7 @@ from __future__ import annotations
 import itertools
 import time
 import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Literal
@@ -29,10 +29,11 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import AssemblyProblem, PartModel, Robot
 from asmteach.core.io import describe_os_error, to_jsonable, write_json, write_model
 from asmteach.core.models import AssemblyTask, Detection, Plan, RunReport, StageOutcome, StrictModel, TablePlane
+from asmteach.core.pose_error import nearest_symmetric, pose_error
 from asmteach.core.scene import SceneSettings, random_start_poses
 from asmteach.core.symmetry import part_symmetries
 
-__all__ = ["ExecutionSettings", "StageFailed", "pose_error", "run_pipeline"]
+__all__ = ["ExecutionSettings", "StageFailed", "run_pipeline"]
 
 
 class ExecutionSettings(StrictModel):
@@ -79,42 +80,6 @@ class StageFailed(Exception):
         super().__init__(reason)
         self.reason = reason
         self.details = details or {}
-
-
-def pose_error(T_est: np.ndarray, T_true: np.ndarray) -> dict[str, float]:
-    """Position (mm) and rotation (deg) error of an estimated pose."""
-    return {
-        "position_mm": 1000.0 * geometry.translation_distance(T_est, T_true),
-        "angle_deg": float(np.degrees(geometry.rotation_distance(T_est[:3, :3], T_true[:3, :3]))),
-    }
-
-
-def symmetric_pose_error(T_est: np.ndarray, T_ref: np.ndarray, left: Sequence[np.ndarray] = (),
-                         right: Sequence[np.ndarray] = ()) -> dict[str, float]:
-    """:func:`pose_error` of ``T_est`` against the nearest of ``inv(S_l) @ T_ref @ S_r`` (mm, deg).
-
-    ``left`` holds the symmetries of the reference frame's part, ``right``
-    those of the estimated part (part-frame transforms from
-    :func:`asmteach.core.symmetry.part_symmetries`): poses that differ by
-    them put the same solid in the same place.
-    """
-    best: dict[str, float] | None = None
-    for S_l in left or [np.eye(4)]:
-        for S_r in right or [np.eye(4)]:
-            err = pose_error(T_est, geometry.invert(S_l) @ T_ref @ S_r)
-            if best is None or err["position_mm"] + err["angle_deg"] < best["position_mm"] + best["angle_deg"]:
-                best = err
-    assert best is not None
-    return best
-
-
-def nearest_symmetric(T: np.ndarray, T_ref: np.ndarray, symmetries: Sequence[np.ndarray]) -> np.ndarray:
-    """Of the poses ``T @ S`` that put the same solid in the same place, the one nearest ``T_ref``."""
-    def cost(S: np.ndarray) -> float:
-        err = pose_error(T @ S, T_ref)
-        return err["position_mm"] + err["angle_deg"]
-
-    return T @ min(symmetries or [np.eye(4)], key=cost)
 
 
 def symmetric_surface_error(part: PartModel, T_est: np.ndarray, T_true: np.ndarray, n: int = 500) -> float:
@@ -255,10 +220,10 @@ def _teach(run: _Run, true_task: AssemblyTask) -> AssemblyTask:
         err = pose_error(learned.T_A_B, true_task.T_A_B)
         v_true = np.asarray(true_task.v_a, float)
         v_err = float(np.degrees(np.arccos(np.clip(np.dot(learned.v_a, v_true) / np.linalg.norm(v_true), -1, 1))))
-        d.update(T_A_B_error_mm=round(err["position_mm"], 4), T_A_B_error_deg=round(err["angle_deg"], 4),
+        d.update(T_A_B_error_mm=round(err.position_mm, 4), T_A_B_error_deg=round(err.angle_deg, 4),
                  v_a_error_deg=round(v_err, 4))
         run.report.task = learned
-        run.report.metrics.update(teach_position_mm=err["position_mm"], teach_angle_deg=err["angle_deg"],
+        run.report.metrics.update(teach_position_mm=err.position_mm, teach_angle_deg=err.angle_deg,
                                   teach_v_a_deg=v_err)
         write_model(run.out / "task.json", learned)
         run.artefact("task", run.out / "task.json", "json")
@@ -301,9 +266,9 @@ def _detect(run: _Run, robot: Robot, parts: tuple[PartModel, ...], table: TableP
             for key in ("rough", "corrected"):
                 T = getattr(det, key)
                 if T is not None:
-                    err = symmetric_pose_error(T, T_true, (), run.symmetries(part))
-                    err["surface_mm"] = symmetric_surface_error(part, T, T_true)
-                    det.details[f"{key}_error"] = err
+                    err = pose_error(T, T_true, (), run.symmetries(part))
+                    surface_mm = symmetric_surface_error(part, T, T_true)
+                    det.details[f"{key}_error"] = {**err.short(), "surface_mm": surface_mm}
             out[part.name] = det
             run.report.detections.append(det)
             best = det.details.get("corrected_error") or det.details["rough_error"]
@@ -424,21 +389,21 @@ def _look_again(run: _Run, robot: Robot, task: AssemblyTask, parts: tuple[PartMo
             T = corrector.correct(T, a, table, _segment_near(cloud, a, T), viewpoint=viewpoint).T_world_part
         T_near = nearest_symmetric(T, result.T_world_a_goal, run.symmetries(a))  # the same solid, nearest the goal
         err = pose_error(T_near, result.T_world_a_goal)
-        d["a_vs_goal"] = {k: round(v, 3) for k, v in err.items()}
+        d["a_vs_goal"] = err.short(3)
         d["T_world_a_seen"] = T_near.tolist()
         # the simulator's truth, to tell placing errors from detection errors in the report
         T_true = robot.part_pose(a.name)
-        truth = symmetric_pose_error(T_true, result.T_world_a_goal, (), run.symmetries(a))
-        d["a_true_vs_goal"] = {k: round(v, 3) for k, v in truth.items()}
+        truth = pose_error(T_true, result.T_world_a_goal, (), run.symmetries(a))
+        d["a_true_vs_goal"] = truth.short(3)
         d["T_world_a_true"] = T_true.tolist()
         d["still_ambiguous"] = bool(det.details.get("ambiguous"))
         planner, motion = run.plugin("assembly_planner"), run.plugin("motion_planner")
         problem = AssemblyProblem(a, b, task, T, detections[b.name].best, grasps[a.name], grasps[b.name], table)
         d["replanned"] = d["reaimed"] = False
-        if err["position_mm"] <= ex.success_a_goal_mm and err["angle_deg"] <= ex.success_angle_deg:
+        if err.position_mm <= ex.success_a_goal_mm and err.angle_deg <= ex.success_angle_deg:
             b_off = pose_error(T_near @ task.T_A_B, result.T_world_a_goal @ task.T_A_B)
-            d["b_goal_shift"] = {k: round(v, 3) for k, v in b_off.items()}
-            if b_off["position_mm"] <= ex.reaim_mm and b_off["angle_deg"] <= ex.reaim_deg:
+            d["b_goal_shift"] = b_off.short(3)
+            if b_off.position_mm <= ex.reaim_mm and b_off.angle_deg <= ex.reaim_deg:
                 return result, rest
             try:
                 new = planner.plan_insertion(problem, robot, motion, T_world_a=T_near,
@@ -457,7 +422,7 @@ def _look_again(run: _Run, robot: Robot, task: AssemblyTask, parts: tuple[PartMo
         _write_plan_again(run, new.plan)
         d["segments"] = len(new.plan.segments)
         if not new.success:
-            raise StageFailed(f"{a.name} is not at its goal ({err['position_mm']:.1f} mm / {err['angle_deg']:.1f} deg "
+            raise StageFailed(f"{a.name} is not at its goal ({err.position_mm:.1f} mm / {err.angle_deg:.1f} deg "
                               f"off) and planning again failed: {new.reason}", {"failed_at": new.failed_at})
         return new, new.plan
 
@@ -593,15 +558,15 @@ def _measure(run: _Run, robot: Robot, learned: AssemblyTask, true_task: Assembly
         T_A_B = geometry.invert(T_a) @ T_b
         # A symmetric part may be detected, and so assembled, in any of its symmetric poses.
         sym_a, sym_b = run.symmetries(a), run.symmetries(b)
-        vs_taught = symmetric_pose_error(T_A_B, learned.T_A_B, sym_a, sym_b)
-        vs_true = symmetric_pose_error(T_A_B, true_task.T_A_B, sym_a, sym_b)
-        a_goal_mm = symmetric_pose_error(T_a, result.T_world_a_goal, (), sym_a)["position_mm"]
+        vs_taught = pose_error(T_A_B, learned.T_A_B, sym_a, sym_b)
+        vs_true = pose_error(T_A_B, true_task.T_A_B, sym_a, sym_b)
+        a_goal_mm = pose_error(T_a, result.T_world_a_goal, (), sym_a).position_mm
         ex = run.execution
-        ok = (vs_taught["position_mm"] <= ex.success_position_mm and vs_taught["angle_deg"] <= ex.success_angle_deg
+        ok = (vs_taught.position_mm <= ex.success_position_mm and vs_taught.angle_deg <= ex.success_angle_deg
               and a_goal_mm <= ex.success_a_goal_mm)
         run.report.metrics.update(
-            achieved_vs_taught_mm=vs_taught["position_mm"], achieved_vs_taught_deg=vs_taught["angle_deg"],
-            achieved_vs_true_mm=vs_true["position_mm"], achieved_vs_true_deg=vs_true["angle_deg"],
+            achieved_vs_taught_mm=vs_taught.position_mm, achieved_vs_taught_deg=vs_taught.angle_deg,
+            achieved_vs_true_mm=vs_true.position_mm, achieved_vs_true_deg=vs_true.angle_deg,
             a_goal_error_mm=a_goal_mm,
         )
         d.update({k: round(v, 3) for k, v in run.report.metrics.items() if k.startswith(("achieved", "a_goal"))})
@@ -611,8 +576,8 @@ def _measure(run: _Run, robot: Robot, learned: AssemblyTask, true_task: Assembly
         run.report.success = bool(ok)
         if not ok:
             raise StageFailed(
-                f"assembled outside tolerance: B in A off by {vs_taught['position_mm']:.2f} mm / "
-                f"{vs_taught['angle_deg']:.2f} deg (limits {ex.success_position_mm} mm / {ex.success_angle_deg} deg), "
+                f"assembled outside tolerance: B in A off by {vs_taught.position_mm:.2f} mm / "
+                f"{vs_taught.angle_deg:.2f} deg (limits {ex.success_position_mm} mm / {ex.success_angle_deg} deg), "
                 f"A {a_goal_mm:.2f} mm from its goal (limit {ex.success_a_goal_mm} mm)" + _worst_slip(run.report)
             )
 

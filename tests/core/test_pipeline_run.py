@@ -51,16 +51,16 @@ def test_look_again_names_its_choices(tmp_path: Path, capsys: pytest.CaptureFixt
 def test_nearest_symmetric_pose_is_the_twin_closest_to_the_reference() -> None:
     """A square peg seen turned 90 deg about its axis (plus noise) is the same solid as the planned pose."""
     from asmteach.core import geometry
-    from asmteach.core.pipeline import nearest_symmetric, pose_error
+    from asmteach.core.pose_error import nearest_symmetric, pose_error
     from asmteach.core.symmetry import part_symmetries
 
     peg = build_part(load_structure(STRUCTURE).part_b)
     syms = part_symmetries(peg.mesh, np.asarray(peg.center_of_mass))
     T_ref = geometry.from_rpy(0.0, 0.0, 0.4, t=[0.4, 0.0, 0.02])
     seen = T_ref @ geometry.from_rpy(0.0, 0.0, np.radians(90.5), t=[0.0003, 0.0, 0.0])
-    assert pose_error(seen, T_ref)["angle_deg"] > 90.0
+    assert pose_error(seen, T_ref).angle_deg > 90.0
     near = nearest_symmetric(seen, T_ref, syms)
-    assert pose_error(near, T_ref)["angle_deg"] == pytest.approx(0.5, abs=1e-6)
+    assert pose_error(near, T_ref).angle_deg == pytest.approx(0.5, abs=1e-6)
     np.testing.assert_allclose(geometry.transform_points(near, peg.mesh.vertices).mean(0),
                                geometry.transform_points(seen, peg.mesh.vertices).mean(0), atol=1e-9)
 
