@@ -27,11 +27,11 @@ from pathlib import Path
 import numpy as np
 
 from asmteach.core.io import atomic_path, write_json
-from asmteach.plugins.planners.motion.batch import batched
-from asmteach.plugins.planners.motion.interpolate import densify
+from asmteach.core.trajectory.batch import batched, inverse_clearance_cost
+from asmteach.core.trajectory.interpolate import densify
 from asmteach.plugins.planners.motion.ompl_planners import RRTConnectPlanner
 from asmteach.plugins.planners.motion.toyworld import JointWorld, clutter6d
-from asmteach.plugins.planners.motion.trrt import TRRTPlanner, inverse_clearance_cost
+from asmteach.plugins.planners.motion.trrt import TRRTPlanner
 
 
 def run(

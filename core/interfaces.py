@@ -248,7 +248,7 @@ class MotionPlanner(Plugin):
         ``is_valid(q)`` says whether a configuration is collision-free;
         ``is_valid`` and ``cost`` may also carry a vectorised ``.batch(qs)``
         for ``(n, dof)`` configurations, which planners may use to check
-        whole edges at once (see ``asmteach.plugins.planners.motion.batch``);
+        whole edges at once (see ``asmteach.core.trajectory.batch``);
         ``cost(q)`` is the state cost a cost-aware planner minimises (higher is
         worse, e.g. inverse clearance). Returns a typed result carrying the
         reason of a failure (``"timeout after 5.0 s"``, ``"start in collision"``).

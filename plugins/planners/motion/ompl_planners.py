@@ -22,7 +22,7 @@ from ompl import geometric as og
 
 from asmteach.core.failures import FailureKind
 from asmteach.core.interfaces import MotionPlanner, MotionResult
-from asmteach.plugins.planners.motion.batch import batch_of
+from asmteach.core.trajectory.batch import batch_of
 from asmteach.plugins.planners.motion.query import (
     MotionSettings,
     check_query,

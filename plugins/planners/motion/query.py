@@ -19,7 +19,7 @@ from asmteach.core.errors import UserError
 from asmteach.core.failures import FailureKind
 from asmteach.core.interfaces import MotionResult
 from asmteach.core.models import StrictModel
-from asmteach.plugins.planners.motion.interpolate import densify
+from asmteach.core.trajectory.interpolate import densify
 from asmteach.plugins.planners.motion.shortcut import SegmentChecker, shorten
 from asmteach.plugins.planners.motion.space import JointSpace
 

@@ -60,8 +60,7 @@ from scipy.spatial import cKDTree
 
 from asmteach.core.failures import FailureKind
 from asmteach.core.interfaces import MotionPlanner, MotionResult
-from asmteach.plugins.planners.motion.batch import Batched
-from asmteach.plugins.planners.motion.interpolate import densify
+from asmteach.core.trajectory.interpolate import densify
 from asmteach.plugins.planners.motion.query import (
     MotionSettings,
     check_query,
@@ -72,7 +71,7 @@ from asmteach.plugins.planners.motion.query import (
 )
 from asmteach.plugins.planners.motion.space import JointSpace, seed_ompl
 
-__all__ = ["TRRTPlanner", "TRRTSettings", "inverse_clearance_cost"]
+__all__ = ["TRRTPlanner", "TRRTSettings"]
 
 
 class TRRTSettings(MotionSettings):
@@ -105,31 +104,6 @@ class TRRTSettings(MotionSettings):
         True, description="Try the straight motion start -> goal first (taken if valid and not costlier than its ends)."
     )
     max_iterations: int = Field(200_000, ge=1, description="Upper bound on tree-growing iterations per query.")
-
-
-def inverse_clearance_cost(
-    clearance: Callable[[np.ndarray], float], floor: float = 1e-3, cap: float = math.inf
-) -> Callable[[np.ndarray], float]:
-    """Cost map ``1 / min(max(clearance(q), floor), cap)`` (1 / metres for a robot, 1 / radians in toy worlds).
-
-    ``clearance(q)`` is the distance from the robot (and held part) to the
-    world at ``q``. ``floor`` bounds the cost where it touches; ``cap`` is the
-    clearance beyond which the planner does not care (the cost is flat there, so
-    open space is explored freely and the transition test only bites near
-    obstacles). When ``clearance`` has a vectorised twin ``clearance.batch(qs)``
-    the cost gets one too.
-    """
-    lo, hi = float(floor), float(cap)
-    if not 0 < lo < hi:
-        raise ValueError(f"inverse_clearance_cost needs 0 < floor < cap (got floor={floor}, cap={cap})")
-
-    def one(q: np.ndarray) -> float:
-        return 1.0 / min(max(float(clearance(q)), lo), hi)
-
-    many = getattr(clearance, "batch", None)
-    if callable(many):
-        return Batched(one, lambda qs: 1.0 / np.clip(np.asarray(many(qs), dtype=float), lo, hi))
-    return one
 
 
 class _Grow(enum.Enum):

@@ -5,9 +5,9 @@
 speed limits and an acceleration limit, ready for ``Robot.execute``. Two
 timings (``TIMINGS``): ``"toppra"`` (the default) parametrises each motion once
 through all its waypoints, time-optimally, with corner blends
-(:mod:`asmteach.plugins.planners.motion.blended`), and holds the insertion's
+(:mod:`asmteach.core.trajectory.blended`), and holds the insertion's
 straight line at ``insertion_speed``; ``"trapezoid"`` (the old one) stops at
-every waypoint (:mod:`asmteach.plugins.planners.motion.timing`). Either way
+every waypoint (:mod:`asmteach.core.trajectory.timing`). Either way
 the plan's stats carry the robot seconds by kind of motion
 (:func:`segment_kinds`: transit, approach, insertion, regrasp) for the timing
 used and, for comparison on the same paths, for the trapezoid.
@@ -34,8 +34,8 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Obstacle, Robot
 from asmteach.core.io import atomic_path
 from asmteach.core.models import Plan, PlanSegment
-from asmteach.plugins.planners.motion.blended import DEFAULT_DEVIATION, BlendReport, time_optimal
-from asmteach.plugins.planners.motion.timing import segment_profile, time_parametrize, to_trajectory
+from asmteach.core.trajectory.blended import DEFAULT_DEVIATION, BlendReport, time_optimal
+from asmteach.core.trajectory.timing import segment_profile, time_parametrize, to_trajectory
 from asmteach.plugins.planners.regrasp.assembly import Step
 from asmteach.plugins.planners.regrasp.graph import GOAL, START
 

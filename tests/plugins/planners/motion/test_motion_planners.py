@@ -9,10 +9,11 @@ from asmteach.core import registry
 from asmteach.core.errors import UserError
 from asmteach.core.failures import FailureKind
 from asmteach.core.interfaces import MotionPlanner
-from asmteach.plugins.planners.motion.interpolate import densify
+from asmteach.core.trajectory.batch import inverse_clearance_cost
+from asmteach.core.trajectory.interpolate import densify
 from asmteach.plugins.planners.motion.ompl_planners import RRTConnectPlanner
 from asmteach.plugins.planners.motion.toyworld import Box, JointWorld
-from asmteach.plugins.planners.motion.trrt import TRRTPlanner, inverse_clearance_cost
+from asmteach.plugins.planners.motion.trrt import TRRTPlanner
 
 PLANNERS = [TRRTPlanner, RRTConnectPlanner]
 
@@ -152,7 +153,7 @@ def test_registered_entry_points_and_settings() -> None:
 def test_rrtconnect_shortens_with_batched_checks_when_offered(passage2d) -> None:
     """Given a vectorised validity check, RRTConnect's found path is shortened like T-RRT's (a few batched
     calls, not OMPL's one python call per state): same seed, same path; valid, ends kept, no longer."""
-    from asmteach.plugins.planners.motion.batch import batched
+    from asmteach.core.trajectory.batch import batched
 
     world, start, goal = passage2d
     kw = {"lower": world.lower, "upper": world.upper, "time_limit": 20.0}

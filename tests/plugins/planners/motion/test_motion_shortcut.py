@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from asmteach.plugins.planners.motion.interpolate import densify
+from asmteach.core.trajectory.interpolate import densify
 from asmteach.plugins.planners.motion.shortcut import SegmentChecker, shorten
 from asmteach.plugins.planners.motion.toyworld import Box, JointWorld
 

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from asmteach.core.failures import FailureKind
-from asmteach.plugins.planners.motion.batch import batched
-from asmteach.plugins.planners.motion.interpolate import densify
+from asmteach.core.trajectory.batch import batched, inverse_clearance_cost
+from asmteach.core.trajectory.interpolate import densify
 from asmteach.plugins.planners.motion.ompl_planners import RRTConnectPlanner
 from asmteach.plugins.planners.motion.toyworld import Box, JointWorld, narrow_passage
-from asmteach.plugins.planners.motion.trrt import TRRTPlanner, inverse_clearance_cost
+from asmteach.plugins.planners.motion.trrt import TRRTPlanner
 
 
 def vectorised(world: JointWorld) -> dict:
@@ -115,19 +115,6 @@ def test_failure_reports_how_close_the_trees_came() -> None:
     assert not res.success and res.kind is FailureKind.TIMEOUT
     # The closed wall is 0.2 rad thick, so the two trees stay at least that far apart.
     assert res.stats["tree_gap"] >= 0.2 - 1e-9
-
-
-def test_inverse_clearance_cost_floor_cap_and_batch() -> None:
-    clearance = batched(lambda q: float(q[0]), lambda qs: qs[:, 0])
-    cost = inverse_clearance_cost(clearance, floor=0.01, cap=0.5)
-    qs = np.array([[-1.0], [0.0], [0.005], [0.1], [0.5], [3.0]])
-    expected = np.array([100.0, 100.0, 100.0, 10.0, 2.0, 2.0])
-    assert np.allclose([cost(q) for q in qs], expected)
-    assert np.allclose(cost.batch(qs), expected)
-    plain = inverse_clearance_cost(lambda q: float(q[0]))
-    assert not hasattr(plain, "batch") and plain(np.array([0.25])) == pytest.approx(4.0)
-    with pytest.raises(ValueError, match="floor < cap"):
-        inverse_clearance_cost(clearance, floor=0.5, cap=0.1)
 
 
 def test_direct_check_batched_agrees_with_every_state_and_stops_at_the_coarse_ones() -> None:

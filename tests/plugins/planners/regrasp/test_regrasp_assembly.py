@@ -11,7 +11,7 @@ from asmteach.core.interfaces import AssemblyProblem, Robot
 from asmteach.core.models import TablePlane
 from asmteach.core.parts import build_part, load_structure
 from asmteach.core.scene import SceneSettings, random_start_poses
-from asmteach.plugins.planners.motion.interpolate import densify
+from asmteach.core.trajectory.interpolate import densify
 from asmteach.plugins.planners.placements.planner import compute_placements
 from asmteach.plugins.planners.regrasp.assembly import AssemblySettings, placement_slots
 from asmteach.plugins.planners.regrasp.goals import choose_assembly_goal

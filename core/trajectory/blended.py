@@ -66,7 +66,7 @@ import toppra.algorithm
 import toppra.constraint
 
 from asmteach.core.errors import UserError
-from asmteach.plugins.planners.motion.timing import TimedPath, joint_limits, time_parametrize
+from asmteach.core.trajectory.timing import TimedPath, joint_limits, time_parametrize
 
 __all__ = ["DEFAULT_DEVIATION", "BlendReport", "BlendedPath", "time_optimal"]
 

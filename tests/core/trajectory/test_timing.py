@@ -5,7 +5,7 @@ import pytest
 
 from asmteach.core.errors import UserError
 from asmteach.core.models import Trajectory
-from asmteach.plugins.planners.motion.timing import segment_profile, time_parametrize, to_trajectory
+from asmteach.core.trajectory.timing import segment_profile, time_parametrize, to_trajectory
 
 V = np.array([1.0, 0.5, 2.0])
 A = np.array([2.0, 1.0, 4.0])

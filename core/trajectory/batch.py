@@ -8,18 +8,20 @@ batch), so a caller may hand a :class:`Batched` callable instead: it still
 answers one configuration (OMPL's validity checker and RRTConnect use that) and
 also ``batch(qs)`` for ``(n, dof)`` configurations, which T-RRT uses to check a
 whole motion segment in one call. Any plain callable works too:
-:func:`batch_of` falls back to a python loop.
+:func:`batch_of` falls back to a python loop. :func:`inverse_clearance_cost`
+turns a (batched) clearance into the cost map a cost-aware planner climbs.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-__all__ = ["Batched", "batch_of", "batched"]
+__all__ = ["Batched", "batch_of", "batched", "inverse_clearance_cost"]
 
 
 @dataclass(frozen=True)
@@ -56,3 +58,28 @@ def batch_of(fn: Callable[[np.ndarray], Any]) -> Callable[[np.ndarray], np.ndarr
         return np.array([fn(q) for q in np.atleast_2d(qs)])
 
     return loop
+
+
+def inverse_clearance_cost(
+    clearance: Callable[[np.ndarray], float], floor: float = 1e-3, cap: float = math.inf
+) -> Callable[[np.ndarray], float]:
+    """Cost map ``1 / min(max(clearance(q), floor), cap)`` (1 / metres for a robot, 1 / radians in toy worlds).
+
+    ``clearance(q)`` is the distance from the robot (and held part) to the
+    world at ``q``. ``floor`` bounds the cost where it touches; ``cap`` is the
+    clearance beyond which the planner does not care (the cost is flat there, so
+    open space is explored freely and the transition test only bites near
+    obstacles). When ``clearance`` has a vectorised twin ``clearance.batch(qs)``
+    the cost gets one too.
+    """
+    lo, hi = float(floor), float(cap)
+    if not 0 < lo < hi:
+        raise ValueError(f"inverse_clearance_cost needs 0 < floor < cap (got floor={floor}, cap={cap})")
+
+    def one(q: np.ndarray) -> float:
+        return 1.0 / min(max(float(clearance(q)), lo), hi)
+
+    many = getattr(clearance, "batch", None)
+    if callable(many):
+        return Batched(one, lambda qs: 1.0 / np.clip(np.asarray(many(qs), dtype=float), lo, hi))
+    return one

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from asmteach.core.errors import UserError
-from asmteach.plugins.planners.motion.blended import BlendedPath, BlendReport, time_optimal
-from asmteach.plugins.planners.motion.timing import time_parametrize
+from asmteach.core.trajectory.blended import BlendedPath, BlendReport, time_optimal
+from asmteach.core.trajectory.timing import time_parametrize
 
 V = np.array([1.0, 0.5, 2.0])  # rad/s
 A = np.array([2.0, 1.0, 4.0])  # rad/s^2

@@ -3,7 +3,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from asmteach.plugins.planners.motion.interpolate import densify, densify_tcp, first_invalid
+from asmteach.core.trajectory.interpolate import densify, densify_tcp, first_invalid
 
 
 def planar_tcp(q: np.ndarray) -> np.ndarray:
