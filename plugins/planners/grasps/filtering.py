@@ -19,9 +19,9 @@ from typing import Literal
 import numpy as np
 import trimesh
 
+from asmteach.core.hand_geometry import MeshCollider, hand_boxes
 from asmteach.core.interfaces import Obstacle, Robot
 from asmteach.core.models import Grasp
-from asmteach.plugins.planners.grasps.hand_geometry import MeshCollider, hand_boxes
 
 __all__ = ["STATUS_COLORS", "GraspVerdict", "filter_grasps_at_pose", "render_verdicts"]
 

@@ -29,9 +29,9 @@ import pybullet
 
 from asmteach.core import geometry
 from asmteach.core.convex_pieces import decompose
+from asmteach.core.hand_geometry import hand_boxes
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Grasp, HandSpec
-from asmteach.plugins.planners.grasps.hand_geometry import hand_boxes
 
 __all__ = ["HoldResult", "HoldSimulator"]
 

@@ -74,6 +74,7 @@ import numpy as np
 from pydantic import Field, ValidationError
 
 from asmteach.core.errors import UserError
+from asmteach.core.hand_geometry import MeshCollider, hand_boxes
 from asmteach.core.interfaces import GraspPlanner, PartModel
 from asmteach.core.io import cache_root, write_json
 from asmteach.core.models import Grasp, HandSpec, StrictModel
@@ -86,7 +87,6 @@ from asmteach.plugins.planners.grasps.checks import (
     check_wall_thickness,
 )
 from asmteach.plugins.planners.grasps.contact import PadStrip, load_ratio, pad_contacts, pad_strip
-from asmteach.plugins.planners.grasps.hand_geometry import MeshCollider, hand_boxes
 from asmteach.plugins.planners.grasps.sampling import ContactPairs, Raycaster, find_opposite_contacts, sample_surface
 from asmteach.plugins.planners.placements.planner import compute_placements
 

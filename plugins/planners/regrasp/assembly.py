@@ -41,11 +41,11 @@ from pydantic import Field
 
 from asmteach.core.failures import FailureKind
 from asmteach.core.geometry import compose, from_rotation, rot_z
+from asmteach.core.hand_geometry import MeshCollider
 from asmteach.core.interfaces import MotionPlanner, Obstacle, PartModel, Robot
 from asmteach.core.models import Grasp, GripperEvent, Placement, StrictModel
 from asmteach.core.trajectory.batch import batched, inverse_clearance_cost
 from asmteach.core.trajectory.interpolate import densify
-from asmteach.plugins.planners.grasps.hand_geometry import MeshCollider
 from asmteach.plugins.planners.regrasp.feasibility import (
     ScreenSettings,
     approach_offset,

@@ -27,9 +27,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from asmteach.core.geometry import compose, from_rotation
+from asmteach.core.hand_geometry import MeshCollider, hand_boxes
 from asmteach.core.interfaces import Obstacle, Robot
 from asmteach.core.models import Grasp, HandSpec
-from asmteach.plugins.planners.grasps.hand_geometry import MeshCollider, hand_boxes
 from asmteach.plugins.planners.regrasp.graph import GraspFeasibility, PoseSlot
 
 __all__ = [

@@ -6,10 +6,10 @@ import numpy as np
 import trimesh
 
 from asmteach.core import geometry
+from asmteach.core.hand_geometry import hand_boxes
 from asmteach.core.interfaces import Obstacle
 from asmteach.core.models import Grasp
 from asmteach.plugins.planners.grasps.filtering import STATUS_COLORS, filter_grasps_at_pose, render_verdicts
-from asmteach.plugins.planners.grasps.hand_geometry import hand_boxes
 from asmteach.plugins.planners.grasps.planner import AntipodalGraspPlanner
 
 
@@ -74,7 +74,7 @@ def test_out_of_reach_is_ik_infeasible(block, hand, point_arm, table) -> None:
 def test_with_the_nextage_robot(hand, make_box, table) -> None:
     """The real robot plugin: IK solutions of feasible grasps reproduce the TCP pose."""
     from asmteach.core import registry
-    from asmteach.plugins.planners.grasps.hand_geometry import MeshCollider
+    from asmteach.core.hand_geometry import MeshCollider
 
     with registry.create("robots", "nextage_pybullet") as robot:
         part = make_box([0.040, 0.040, 0.040], name="cube")

@@ -10,10 +10,10 @@ import pytest
 import trimesh
 
 from asmteach.core.errors import UserError
+from asmteach.core.hand_geometry import hand_boxes
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Primitive
 from asmteach.plugins.planners.grasps.antipodal import antipodal_mask, friction_half_angle, wrench_space_quality
-from asmteach.plugins.planners.grasps.hand_geometry import hand_boxes
 from asmteach.plugins.planners.grasps.planner import AntipodalGraspPlanner
 
 

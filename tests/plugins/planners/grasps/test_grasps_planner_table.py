@@ -15,10 +15,10 @@ import open3d as o3d
 import pytest
 
 from asmteach.core import geometry
+from asmteach.core.hand_geometry import MeshCollider, hand_boxes, pad_grid
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Grasp, HandSpec, Primitive
 from asmteach.plugins.planners.grasps.filtering import filter_grasps_at_pose
-from asmteach.plugins.planners.grasps.hand_geometry import MeshCollider, hand_boxes, pad_grid
 from asmteach.plugins.planners.grasps.planner import (
     AntipodalGraspPlanner,
     resting_directions,

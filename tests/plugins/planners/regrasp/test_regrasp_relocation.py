@@ -18,10 +18,10 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from asmteach.core import geometry
+from asmteach.core.hand_geometry import MeshCollider
 from asmteach.core.interfaces import IKResult, MotionResult, Obstacle, PartModel, Robot
 from asmteach.core.models import Grasp, HandSpec, PartSpec, Primitive, SolidSpec
 from asmteach.core.parts import build_part
-from asmteach.plugins.planners.grasps.hand_geometry import MeshCollider
 from asmteach.plugins.planners.placements.planner import compute_placements
 from asmteach.plugins.planners.regrasp.assembly import (
     AssemblySettings,

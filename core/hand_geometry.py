@@ -1,8 +1,9 @@
 """The parallel-jaw hand as boxes, meshes and python-fcl objects at a grasp.
 
-All boxes are in the TCP frame of :class:`~asmteach.core.models.HandSpec`
-(z approach, out of the palm toward the object; y jaw axis, finger 0 on -y).
-A finger is a box of ``finger_size`` hanging from the palm's front face
+Shared by the grasp planner, the grasp filter and the regrasp planner. All
+boxes are in the TCP frame of :class:`~asmteach.core.models.HandSpec` (z
+approach, out of the palm toward the object; y jaw axis, finger 0 on -y). A
+finger is a box of ``finger_size`` hanging from the palm's front face
 (``palm_center.z + palm_size.z / 2``) along +z; its inner face lies at
 ``y = -+width / 2`` and carries the pad, a ``pad_size`` rectangle centred on
 the TCP (x, z). Units: metres.
