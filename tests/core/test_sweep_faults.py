@@ -308,11 +308,11 @@ def test_a_damaged_grasp_cache_is_planned_again(damage: str, tmp_path: Path, mon
 
 WATCHED = '''
 import os, sys, time, multiprocessing as mp
-from asmteach.core import sweep
+from asmteach.core.sweep import executors
 
 def worker(parent, path):
     sys.platform = "other"  # no prctl: the watching thread must do it
-    sweep._die_with_parent(parent)
+    executors._die_with_parent(parent)
     open(path, "w").write(str(os.getpid()))
     time.sleep(60)
 
