@@ -1,8 +1,12 @@
 """Run configurations: YAML into pydantic, with errors a person can act on.
 
-A config names one plugin per role and carries that plugin's settings, which
-the plugin's own ``Settings`` model validates. Every error is one line giving
-the key path and the reason, e.g.
+Every section of a run config is a strict model (an unknown key is an error):
+the top level (:class:`RunConfig`), ``table`` (:class:`TableSettings`),
+``execution`` (:class:`ExecutionSettings`, its ``scene`` a
+:class:`~asmteach.core.scene.SceneSettings`), each role's ``settings`` (the
+plugin's own ``Settings`` model) and ``demo`` (the teacher plugin's
+``DemoSettings`` model). ``asmteach plugins --settings`` lists them all.
+Every error is one line giving the key path and the reason, e.g.
 ``detector.settings.voxel_size: Input should be greater than 0 (got -1)``.
 """
 
@@ -10,23 +14,26 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, Field, ValidationError
+from pydantic import BaseModel, Field, ValidationError, field_validator
 
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Plugin
 from asmteach.core.io import read_yaml
 from asmteach.core.models import StrictModel, resolve_relative
+from asmteach.core.scene import SceneSettings
 
 __all__ = [
     "MAX_SEED",
+    "ExecutionSettings",
     "PluginChoice",
     "RunConfig",
     "TableSettings",
     "check_finite",
     "format_validation_error",
     "load_run_config",
+    "validate_demo",
     "validate_settings",
 ]
 
@@ -34,8 +41,10 @@ __all__ = [
 class PluginChoice(StrictModel):
     """Which plugin fills a role, and its settings (validated by the plugin)."""
 
-    plugin: str = Field(description="entry-point name within the role's group")
-    settings: dict[str, Any] = Field(default_factory=dict)
+    plugin: str = Field(description="entry-point name within the role's group (`asmteach plugins` lists them)")
+    settings: dict[str, Any] = Field(
+        default_factory=dict, description="the plugin's own settings, validated by its Settings model"
+    )
 
 
 Coordinate = Annotated[float, Field(ge=-5.0, le=5.0)]
@@ -47,19 +56,70 @@ Extent = Annotated[float, Field(gt=0.0, le=5.0)]
 class TableSettings(StrictModel):
     """The work table in front of the robot (world frame, metres).
 
-    ``center`` and ``size``, when written in a run config, are the robot's
-    table: the run loader (:mod:`asmteach.core.run_setup`) hands them to the
-    robot plugin's ``table_center`` / ``table_size`` settings and checks that
-    the parts' start region lies on it. Left out (not in ``model_fields_set``),
-    the robot's own table is used; the defaults here are the table of the
-    rendered detection scenes (``cvfh`` plugin), which read them directly.
+    One place owns each number: ``height`` is the run's (the simulated table,
+    the planners' table plane and the detectors' all use it); ``center`` and
+    ``size`` are the robot plugin's own table (its ``table_center`` /
+    ``table_size`` settings) unless written here, in which case the run loader
+    (:mod:`asmteach.core.run_setup`) hands them to the robot and checks that
+    the parts' start region lies on that table. The rendered detection scenes
+    of the ``cvfh`` plugin use their own scene table when they are ``None``.
     """
 
-    height: float = Field(0.0, ge=-2.0, le=2.0, description="table top z in the world frame")
-    center: tuple[Coordinate, Coordinate] = Field(
-        (0.45, 0.0), description="table centre x, y; in a run config, only when written: the robot's table")
-    size: tuple[Extent, Extent] = Field(
-        (0.8, 1.2), description="table extent along x, y; in a run config, only when written: the robot's table")
+    height: float = Field(0.0, ge=-2.0, le=2.0, description="table top z in the world frame, metres")
+    center: tuple[Coordinate, Coordinate] | None = Field(
+        None, description="table centre x, y in the world frame, metres; null: the robot plugin's own table"
+    )
+    size: tuple[Extent, Extent] | None = Field(
+        None, description="table extent along world x, y, metres; null: the robot plugin's own table"
+    )
+
+
+class ExecutionSettings(StrictModel):
+    """The run config's ``execution`` section: the simulated world and what is recorded."""
+
+    scene: SceneSettings = Field(
+        default_factory=SceneSettings, description="where the parts start on the table (world x, |y|, metres)"
+    )
+    animation: bool = Field(True, description="record an animated GIF of the execution (execution.gif)")
+    animation_fps: float = Field(4.0, gt=0.0, le=30.0, description="GIF frames per simulated second, 1/s")
+    success_position_mm: float = Field(
+        2.0, gt=0.0, description="success needs B's position in A's frame within this of T_A_B, millimetres"
+    )
+    success_angle_deg: float = Field(
+        2.0, gt=0.0, description="success needs B's rotation in A's frame within this of T_A_B, degrees"
+    )
+    success_a_goal_mm: float = Field(
+        3.0, gt=0.0, description="success needs A within this of its planned goal position, millimetres"
+    )
+    depth_frames: int = Field(
+        4,
+        ge=1,
+        le=30,
+        description="depth frames stacked into the cloud each time the parts are looked at: the noise is new in "
+        "every frame, and four frames cut the peg's detection error from 0.3-0.7 mm to 0.1-0.4 mm (demo seeds 0, 1, "
+        "19, 49, 57, 63), against the hole's 0.5 mm clearance",
+    )
+    recheck_plan: bool = Field(True, description="re-check the plan with the robot's independent collision check")
+    look_again: Literal["never", "ambiguous", "always"] = Field(
+        "always",
+        description="when to detect A again once it stands at its goal: 'ambiguous' only when its first detection "
+        "was (a twin pose explained the view as well); the assembly is planned again if A is not at its goal, and "
+        "B's insertion is aimed at the A that is seen if it is a little off (reaim_mm, reaim_deg)",
+    )
+    reaim_mm: float = Field(
+        0.8,
+        ge=0.0,
+        description="A seen at its goal puts B's assembled pose this far (millimetres) from the planned one: B's "
+        "insertion is planned again into the A that is seen. The detection there is 0.1-0.5 mm off (A itself is put "
+        "down 0.1 mm off as a rule); below this, aiming at what is seen adds more error than it removes",
+    )
+    reaim_deg: float = Field(1.0, ge=0.0, description="the same, for the rotation of B's assembled pose, degrees")
+
+    @field_validator("look_again", mode="before")
+    @classmethod
+    def _look_again_bool(cls, v: Any) -> Any:
+        # configs written before the choice existed said true / false
+        return {True: "ambiguous", False: "never"}.get(v, v) if isinstance(v, bool) else v
 
 
 MAX_SEED = 2**31 - 1
@@ -67,24 +127,45 @@ MAX_SEED = 2**31 - 1
 
 
 class RunConfig(StrictModel):
-    """Top-level config of ``asmteach run`` / ``validate``."""
+    """Top-level config of ``asmteach run`` / ``validate``; paths are relative to the config's folder."""
 
-    name: str = "run"
+    name: str = Field("run", description="name of the run (report title, output folder's record)")
     seed: int = Field(0, ge=0, le=MAX_SEED, description="every random choice of the run flows from it")
     structure: str = Field(description="assembly structure YAML (parts A and B, T_A_B, v_a)")
     camera: str | None = Field(None, description="RGB camera intrinsics YAML; default: a C615-like webcam")
-    table: TableSettings = Field(default_factory=TableSettings)
-    teacher: PluginChoice = Field(default_factory=lambda: PluginChoice(plugin="aruco"))
-    detector: PluginChoice = Field(default_factory=lambda: PluginChoice(plugin="cvfh_icp"))
-    corrector: PluginChoice | None = Field(default_factory=lambda: PluginChoice(plugin="stable_placements"))
-    grasp_planner: PluginChoice = Field(default_factory=lambda: PluginChoice(plugin="antipodal"))
-    motion_planner: PluginChoice = Field(default_factory=lambda: PluginChoice(plugin="trrt"))
-    robot: PluginChoice = Field(default_factory=lambda: PluginChoice(plugin="nextage_pybullet"))
-    assembly_planner: PluginChoice = Field(default_factory=lambda: PluginChoice(plugin="regrasp"))
-    demo: dict[str, Any] = Field(
-        default_factory=dict, description="settings of the demonstration renderer (render-demo)"
+    table: TableSettings = Field(default_factory=TableSettings, description="the work table (world frame, metres)")
+    teacher: PluginChoice = Field(
+        default_factory=lambda: PluginChoice(plugin="aruco"), description="learns T_A_B and v_a (teachers)"
     )
-    execution: dict[str, Any] = Field(default_factory=dict, description="settings of the simulated execution")
+    detector: PluginChoice = Field(
+        default_factory=lambda: PluginChoice(plugin="cvfh_icp"), description="finds each part's pose (detectors)"
+    )
+    corrector: PluginChoice | None = Field(
+        default_factory=lambda: PluginChoice(plugin="stable_placements"),
+        description="snaps a detected pose to a resting pose (correctors); null: none",
+    )
+    grasp_planner: PluginChoice = Field(
+        default_factory=lambda: PluginChoice(plugin="antipodal"), description="grasps of each part (grasp_planners)"
+    )
+    motion_planner: PluginChoice = Field(
+        default_factory=lambda: PluginChoice(plugin="trrt"), description="collision-free arm paths (motion_planners)"
+    )
+    robot: PluginChoice = Field(
+        default_factory=lambda: PluginChoice(plugin="nextage_pybullet"),
+        description="the simulated robot, its sensor and table (robots)",
+    )
+    assembly_planner: PluginChoice = Field(
+        default_factory=lambda: PluginChoice(plugin="regrasp"),
+        description="the pick, place and insert plan (assembly_planners)",
+    )
+    demo: dict[str, Any] = Field(
+        default_factory=dict,
+        description="settings of the teacher's rendered demonstration, validated by the teacher plugin's "
+        "DemoSettings model (`asmteach plugins --settings` lists them)",
+    )
+    execution: ExecutionSettings = Field(
+        default_factory=ExecutionSettings, description="the simulated execution and what counts as success"
+    )
 
     base_dir: Path | None = Field(None, exclude=True, description="folder of the YAML file; set by the loader")
 
@@ -129,8 +210,14 @@ def _echo(value: Any) -> str:
     return text if len(text) <= MAX_ECHO else f"a {type(value).__name__}"
 
 
-_KIND = {"str": "a text", "int": "a number", "float": "a number", "bool": "true/false", "list": "a list",
-         "NoneType": "nothing (null)"}
+_KIND = {
+    "str": "a text",
+    "int": "a number",
+    "float": "a number",
+    "bool": "true/false",
+    "list": "a list",
+    "NoneType": "nothing (null)",
+}
 """How a value read from YAML is named in an error, by its Python type."""
 
 
@@ -146,8 +233,11 @@ def format_validation_error(exc: ValidationError, prefix: str = "") -> str:
             msg = "unknown key (not a setting of this section; check the spelling)"
         elif err["type"] == "missing":
             at = err["loc"][-1] if err["loc"] else None
-            msg = (f"too few values (item [{at}] is missing)" if isinstance(at, int) and not isinstance(at, bool)
-                   else "required key is missing")
+            msg = (
+                f"too few values (item [{at}] is missing)"
+                if isinstance(at, int) and not isinstance(at, bool)
+                else "required key is missing"
+            )
         elif err["type"] in ("model_type", "dict_type", "model_attributes_type"):
             # the whole section (or file) is not a mapping; its text is not echoed
             got = _KIND.get(type(err.get("input")).__name__, f"a {type(err.get('input')).__name__}")
@@ -193,10 +283,32 @@ def validate_settings(cls: type[Plugin], settings: dict[str, Any], *, where: str
         raise UserError(format_validation_error(exc, where)) from None
 
 
+def validate_demo(teacher: type[Plugin], name: str, demo: dict[str, Any]) -> BaseModel | None:
+    """The ``demo`` section validated by the teacher's ``DemoSettings`` model; None if the teacher has none.
+
+    A teacher that renders demonstrations declares the model of their
+    settings as the class attribute ``DemoSettings`` (as it declares
+    ``Settings``); a ``demo`` section given to a teacher without one is an
+    error, not ignored.
+    """
+    model: type[BaseModel] | None = getattr(teacher, "DemoSettings", None)
+    if model is None:
+        if demo:
+            raise UserError(
+                f"demo: the teacher plugin {name!r} takes no demo settings (it renders no "
+                "demonstration); remove the demo section"
+            )
+        return None
+    try:
+        return model.model_validate(demo)
+    except ValidationError as exc:
+        raise UserError(format_validation_error(exc, "demo")) from None
+
+
 def load_run_config(
     path: str | Path, *, check_plugins: bool = True, overrides: dict[str, Any] | None = None
 ) -> RunConfig:
-    """Read and validate a run config, including every chosen plugin's settings.
+    """Read and validate a run config: every section, and with ``check_plugins`` every plugin's settings.
 
     ``overrides`` maps dotted keys (``"detector.settings.voxel_size"``) to
     values applied before validation (used by sweeps).
@@ -226,6 +338,8 @@ def load_run_config(
                 raise UserError(f"{p}: {key}.plugin: {exc}") from None
             try:
                 validate_settings(cls, choice.settings, where=f"{key}.settings")
+                if key == "teacher":
+                    validate_demo(cls, choice.plugin, cfg.demo)
             except UserError as exc:
                 raise UserError(f"{p}: {exc}") from None
         structure = cfg.path(cfg.structure)

@@ -18,59 +18,21 @@ import traceback
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
-from pydantic import Field, ValidationError, field_validator
 
 from asmteach.core import geometry, registry
-from asmteach.core.config import ROLE_OF_KEY, RunConfig, format_validation_error, validate_settings
+from asmteach.core.config import ROLE_OF_KEY, ExecutionSettings, RunConfig, validate_settings
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import AssemblyProblem, PartModel, Robot
 from asmteach.core.io import describe_os_error, to_jsonable, write_json, write_model
-from asmteach.core.models import AssemblyTask, Detection, Plan, RunReport, StageOutcome, StrictModel, TablePlane
+from asmteach.core.models import AssemblyTask, Detection, Plan, RunReport, StageOutcome, TablePlane
 from asmteach.core.pose_error import nearest_symmetric, pose_error
-from asmteach.core.scene import SceneSettings, random_start_poses
+from asmteach.core.scene import random_start_poses
 from asmteach.core.symmetry import part_symmetries
 
-__all__ = ["ExecutionSettings", "StageFailed", "run_pipeline"]
-
-
-class ExecutionSettings(StrictModel):
-    """The config's ``execution`` section: the simulated world and what is recorded."""
-
-    scene: SceneSettings = Field(default_factory=SceneSettings)
-    animation: bool = Field(True, description="record an animated GIF of the execution")
-    animation_fps: float = Field(4.0, gt=0.0, le=30.0, description="frames per simulated second in the GIF")
-    success_position_mm: float = Field(2.0, gt=0.0, description="B in A: position tolerance")
-    success_angle_deg: float = Field(2.0, gt=0.0, description="B in A: rotation tolerance")
-    success_a_goal_mm: float = Field(3.0, gt=0.0, description="A at its goal: position tolerance")
-    depth_frames: int = Field(
-        4, ge=1, le=30,
-        description="depth frames stacked into the cloud each time the parts are looked at: the noise is new in "
-        "every frame, and four frames cut the peg's detection error from 0.3-0.7 mm to 0.1-0.4 mm (demo seeds 0, 1, "
-        "19, 49, 57, 63), against the hole's 0.5 mm clearance",
-    )
-    recheck_plan: bool = Field(True, description="re-check the plan with the robot's independent collision check")
-    look_again: Literal["never", "ambiguous", "always"] = Field(
-        "always",
-        description="when to detect A again once it stands at its goal: 'ambiguous' only when its first detection "
-        "was (a twin pose explained the view as well); the assembly is planned again if A is not at its goal, and "
-        "B's insertion is aimed at the A that is seen if it is a little off (reaim_mm, reaim_deg)",
-    )
-    reaim_mm: float = Field(
-        0.8, ge=0.0,
-        description="A seen at its goal puts B's assembled pose this far (mm) from the planned one: B's insertion is "
-        "planned again into the A that is seen. The detection there is 0.1-0.5 mm off (A itself is put down "
-        "0.1 mm off as a rule); below this, aiming at what is seen adds more error than it removes",
-    )
-    reaim_deg: float = Field(1.0, ge=0.0, description="the same, for the rotation of B's assembled pose (degrees)")
-
-    @field_validator("look_again", mode="before")
-    @classmethod
-    def _look_again_bool(cls, v: Any) -> Any:
-        # configs written before the choice existed said true / false
-        return {True: "ambiguous", False: "never"}.get(v, v) if isinstance(v, bool) else v
+__all__ = ["StageFailed", "run_pipeline"]
 
 
 class StageFailed(Exception):
@@ -104,10 +66,7 @@ class _Run:
         self.cfg, self.out, self.pm = cfg, Path(out_dir), pm
         self.report = RunReport(config=cfg.model_dump(mode="json"), seed=cfg.seed)
         self._symmetries: dict[str, list[np.ndarray]] = {}
-        try:
-            self.execution = ExecutionSettings.model_validate(cfg.execution)
-        except ValidationError as exc:
-            raise UserError(format_validation_error(exc, "execution")) from None
+        self.execution: ExecutionSettings = cfg.execution
 
     def symmetries(self, part: PartModel) -> list[np.ndarray]:
         """The part's symmetry transforms (part frame), computed once per run."""
@@ -184,7 +143,7 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, *, pm: Any | None = None) -> Run
     try:
         learned = _teach(run, true_task)
         robot = run.plugin("robot")
-        table = TablePlane(height=cfg.table.height)
+        table = setup.table  # the one table plane of the run (cfg.table.height)
         truth = _spawn(run, robot, part_a, part_b, table)
         detections = _detect(run, robot, (part_a, part_b), table, truth)
         grasps = _grasps(run, robot, part_a, part_b)

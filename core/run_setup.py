@@ -4,19 +4,22 @@
 pipeline calls :func:`prepare_run` on a config it is handed), so a config
 that validates is a config whose run starts: the structure and both parts
 (meshes in metres, closed, centre of mass inside), the markers, the camera
-and the ``demo`` section (checked by the teacher plugin), the ``execution``
-section (:class:`~asmteach.core.pipeline.ExecutionSettings`), the table and
-every plugin's settings. Any problem is one :class:`UserError` line naming
+and the ``demo`` section (the teacher plugin's ``DemoSettings``, and its own
+check of what a demonstration needs), the ``execution`` section
+(:class:`~asmteach.core.config.ExecutionSettings`), the table and every
+plugin's settings. Any problem is one :class:`UserError` line naming
 the key path (exit 2).
 
 Path rule, the same everywhere: a path is relative to the folder of the
 file that names it (``structure``/``camera`` to the run config, ``part_a``
 to the structure file, a ``mesh`` to its part file).
 
-Table: ``table.center`` / ``table.size`` (world x, y, metres), when given,
-are handed to the robot plugin's ``table_center`` / ``table_size`` settings
-(and ``table.height`` to its ``table_height``), so the simulated table, the
-collision checks and the run agree on one table. The parts' start region
+Table: ``table.center`` / ``table.size`` (world x, y, metres), when given
+(not null), are handed to the robot plugin's ``table_center`` /
+``table_size`` settings (and ``table.height`` to its ``table_height``), so
+the simulated table, the collision checks and the run agree on one table;
+left null, the robot's own table is the run's. :attr:`RunSetup.table` is the
+one table plane every stage of the run uses. The parts' start region
 (``execution.scene``) must lie on that table with room for the parts.
 """
 
@@ -26,20 +29,24 @@ import copy
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel
 
 from asmteach.core import registry
-from asmteach.core.config import ROLE_OF_KEY, RunConfig, format_validation_error, load_run_config, validate_settings
+from asmteach.core.config import (
+    ROLE_OF_KEY,
+    ExecutionSettings,
+    RunConfig,
+    load_run_config,
+    validate_demo,
+    validate_settings,
+)
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel, Teacher
 from asmteach.core.models import AssemblyTask, TablePlane
 from asmteach.core.parts import build_part, load_structure
-
-if TYPE_CHECKING:
-    from asmteach.core.pipeline import ExecutionSettings
 
 __all__ = ["RunSetup", "load_run", "prepare_run", "table_of_robot"]
 
@@ -55,10 +62,12 @@ class RunSetup:
     part_a: PartModel
     part_b: PartModel
     execution: ExecutionSettings
+    """The ``execution`` section (the same object as ``cfg.execution``)."""
     demo: BaseModel | None
     """The ``demo`` section as the teacher's own model; None when the teacher checks none."""
     camera_file: Path | None
     table: TablePlane
+    """The table plane of the run (top at ``cfg.table.height``, world z, metres): every stage uses this one."""
     table_center: tuple[float, float] | None
     """The robot's table centre x, y (metres), when the robot plugin has one."""
     table_size: tuple[float, float] | None
@@ -66,10 +75,17 @@ class RunSetup:
 
     def summary(self) -> str:
         """One line of what was loaded, for ``asmteach validate``."""
-        parts = ", ".join(f"{p.name} ({1000 * float(max(p.mesh.extents)):.0f} mm, {1000 * p.mass:.0f} g, "
-                          f"{len(p.spec.markers)} markers)" for p in (self.part_a, self.part_b))
-        table = (f"table {self.table_size[0]:.2f} x {self.table_size[1]:.2f} m at ({self.table_center[0]:.2f}, "
-                 f"{self.table_center[1]:.2f})" if self.table_center and self.table_size else "the robot's table")
+        parts = ", ".join(
+            f"{p.name} ({1000 * float(max(p.mesh.extents)):.0f} mm, {1000 * p.mass:.0f} g, "
+            f"{len(p.spec.markers)} markers)"
+            for p in (self.part_a, self.part_b)
+        )
+        table = (
+            f"table {self.table_size[0]:.2f} x {self.table_size[1]:.2f} m at ({self.table_center[0]:.2f}, "
+            f"{self.table_center[1]:.2f})"
+            if self.table_center and self.table_size
+            else "the robot's table"
+        )
         return f"structure {self.task.name}: {parts}; {table}, top at z = {self.table.height:.3f} m"
 
 
@@ -89,8 +105,6 @@ def prepare_run(cfg: RunConfig) -> RunSetup:
     The config returned in :attr:`RunSetup.cfg` is a copy whose robot
     settings carry the table; ``cfg`` itself is not changed.
     """
-    from asmteach.core.pipeline import ExecutionSettings  # the pipeline owns it; imported late (no cycle)
-
     cfg = cfg.model_copy(deep=True)
     for key, role in ROLE_OF_KEY.items():  # plugins and their settings (load_run_config does so too, if asked)
         choice = getattr(cfg, key)
@@ -100,10 +114,9 @@ def prepare_run(cfg: RunConfig) -> RunSetup:
             except UserError as exc:
                 raise UserError(f"{key}.plugin: {exc}") from None
             validate_settings(cls, choice.settings, where=f"{key}.settings")
-    try:
-        execution = ExecutionSettings.model_validate(cfg.execution)
-    except ValidationError as exc:
-        raise UserError(format_validation_error(exc, "execution")) from None
+            if key == "teacher":
+                validate_demo(cls, choice.plugin, cfg.demo)
+    execution = cfg.execution
     _check_scene(execution)
 
     structure = cfg.path(cfg.structure)
@@ -131,9 +144,18 @@ def prepare_run(cfg: RunConfig) -> RunSetup:
     center, size = _hand_table_to_robot(cfg)
     if center is not None and size is not None:
         _check_start_region(execution, (part_a, part_b), center, size)
-    return RunSetup(cfg=cfg, task=task, part_a=part_a, part_b=part_b, execution=execution, demo=demo,
-                    camera_file=camera_file, table=TablePlane(height=cfg.table.height), table_center=center,
-                    table_size=size)
+    return RunSetup(
+        cfg=cfg,
+        task=task,
+        part_a=part_a,
+        part_b=part_b,
+        execution=execution,
+        demo=demo,
+        camera_file=camera_file,
+        table=TablePlane(height=cfg.table.height),
+        table_center=center,
+        table_size=size,
+    )
 
 
 def _check_teacher(cfg: RunConfig, task: AssemblyTask, camera_file: Path | None) -> BaseModel | None:
@@ -163,8 +185,10 @@ def _check_contact(task: AssemblyTask, a: PartModel, b: PartModel, structure: Pa
     gap = np.maximum(0.0, np.maximum(va.min(axis=0) - vb.max(axis=0), vb.min(axis=0) - va.max(axis=0)))
     dist = float(np.linalg.norm(gap))
     if dist > CONTACT_GAP_M:
-        raise UserError(f"{structure.name}: T_A_B puts {b.name} {1000 * dist:.0f} mm away from {a.name}; assembled, "
-                        "B touches A (T_A_B is B's pose in A's frame in metres: millimetres written as metres?)")
+        raise UserError(
+            f"{structure.name}: T_A_B puts {b.name} {1000 * dist:.0f} mm away from {a.name}; assembled, "
+            "B touches A (T_A_B is B's pose in A's frame in metres: millimetres written as metres?)"
+        )
 
 
 MARKER_OFF_SURFACE_M = 0.002
@@ -179,9 +203,11 @@ def _check_markers_on_surface(key: str, part: PartModel, structure: Path) -> Non
     _, dist, _ = part.mesh.nearest.on_surface(centres)
     for i, d in enumerate(np.asarray(dist, float)):
         if d > MARKER_OFF_SURFACE_M:
-            raise UserError(f"{structure.name}: {key}.markers[{i}] (id {part.spec.markers[i].id}): its centre is "
-                            f"{1000 * d:.0f} mm off {part.name}'s surface; a marker is printed on a face "
-                            "(T_part_marker is in the part frame, metres)")
+            raise UserError(
+                f"{structure.name}: {key}.markers[{i}] (id {part.spec.markers[i].id}): its centre is "
+                f"{1000 * d:.0f} mm off {part.name}'s surface; a marker is printed on a face "
+                "(T_part_marker is in the part frame, metres)"
+            )
 
 
 def _check_scene(ex: ExecutionSettings) -> None:
@@ -193,8 +219,9 @@ def _check_scene(ex: ExecutionSettings) -> None:
         if lo > hi:
             raise UserError(f"execution.scene.{name}: [{lo:g}, {hi:g}] runs backwards; write [low, high] in metres")
     if ex.scene.y_range[0] < 0:
-        raise UserError("execution.scene.y_range: it is a range of |y| (the parts start on both sides); "
-                        "write it with values >= 0")
+        raise UserError(
+            "execution.scene.y_range: it is a range of |y| (the parts start on both sides); write it with values >= 0"
+        )
 
 
 def table_of_robot(cfg: RunConfig) -> tuple[tuple[float, float] | None, tuple[float, float] | None]:
@@ -202,8 +229,10 @@ def table_of_robot(cfg: RunConfig) -> tuple[tuple[float, float] | None, tuple[fl
     cls = registry.get_class("robots", cfg.robot.plugin)
     st = validate_settings(cls, cfg.robot.settings, where="robot.settings")
     center, size = getattr(st, "table_center", None), getattr(st, "table_size", None)
-    return (None if center is None else (float(center[0]), float(center[1])),
-            None if size is None else (float(size[0]), float(size[1])))
+    return (
+        None if center is None else (float(center[0]), float(center[1])),
+        None if size is None else (float(size[0]), float(size[1])),
+    )
 
 
 def _hand_table_to_robot(cfg: RunConfig) -> tuple[tuple[float, float] | None, tuple[float, float] | None]:
@@ -216,23 +245,28 @@ def _hand_table_to_robot(cfg: RunConfig) -> tuple[tuple[float, float] | None, tu
     cls = registry.get_class("robots", cfg.robot.plugin)
     fields = cls.Settings.model_fields
     settings = copy.deepcopy(cfg.robot.settings)
-    written = cfg.table.model_fields_set  # a default is not a request: the robot keeps its own table then
     given = {"table_center": cfg.table.center, "table_size": cfg.table.size}
     for key, value in given.items():
-        if key.removeprefix("table_") not in written:
+        if value is None:  # left to the robot: it keeps its own table
             continue
         short = key.removeprefix("table_")
         if key not in fields:
-            raise UserError(f"table.{short}: the robot plugin {cfg.robot.plugin!r} has no table of its own "
-                            f"({key} is not one of its settings); remove table.{short}")
+            raise UserError(
+                f"table.{short}: the robot plugin {cfg.robot.plugin!r} has no table of its own "
+                f"({key} is not one of its settings); remove table.{short}"
+            )
         if key in settings and not np.allclose(np.asarray(settings[key], float), np.asarray(value, float)):
-            raise UserError(f"table.{short} {list(value)} and robot.settings.{key} {list(settings[key])} differ; "
-                            f"give the table once, under table.{short}")
+            raise UserError(
+                f"table.{short} {list(value)} and robot.settings.{key} {list(settings[key])} differ; "
+                f"give the table once, under table.{short}"
+            )
         settings[key] = [float(v) for v in value]
     if "table_height" in fields:
         if "table_height" in settings and not math.isclose(float(settings["table_height"]), cfg.table.height):
-            raise UserError(f"table.height {cfg.table.height:g} and robot.settings.table_height "
-                            f"{settings['table_height']} differ; give the height once, under table.height")
+            raise UserError(
+                f"table.height {cfg.table.height:g} and robot.settings.table_height "
+                f"{settings['table_height']} differ; give the height once, under table.height"
+            )
         if "table_height" in settings or cfg.table.height != 0.0:
             settings["table_height"] = float(cfg.table.height)
     cfg.robot.settings = settings
@@ -246,8 +280,9 @@ def _part_radius(part: PartModel) -> float:
     return float(np.max(np.linalg.norm(v - centre, axis=1)))
 
 
-def _check_start_region(ex: ExecutionSettings, parts: tuple[PartModel, PartModel], center: tuple[float, float],
-                        size: tuple[float, float]) -> None:
+def _check_start_region(
+    ex: ExecutionSettings, parts: tuple[PartModel, PartModel], center: tuple[float, float], size: tuple[float, float]
+) -> None:
     """The parts' start region, grown by the larger part's radius, must lie on the table (world x, y, metres)."""
     r = max(_part_radius(p) for p in parts)
     (x0, x1), (y0, y1) = ex.scene.x_range, ex.scene.y_range
@@ -258,4 +293,5 @@ def _check_start_region(ex: ExecutionSettings, parts: tuple[PartModel, PartModel
         raise UserError(
             f"table: the parts start at x {x0:g}..{x1:g} m, |y| {y0:g}..{y1:g} m (execution.scene) and reach "
             f"{1000 * r:.0f} mm around that, off the table x {tx0:.3g}..{tx1:.3g} m, y {ty0:.3g}..{ty1:.3g} m "
-            "(table.center, table.size); move or enlarge the table, or narrow execution.scene")
+            "(table.center, table.size); move or enlarge the table, or narrow execution.scene"
+        )

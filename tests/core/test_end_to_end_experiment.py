@@ -19,7 +19,7 @@ def test_trial_runs_the_config_with_the_trial_seed_and_records_the_failure(tmp_p
     seen = {}
 
     def fake_run(cfg, out_dir, pm=None):
-        seen.update(seed=cfg.seed, animation=cfg.execution.get("animation"), out=out_dir)
+        seen.update(seed=cfg.seed, animation=cfg.execution.animation, out=out_dir)
         return RunReport(config={}, seed=cfg.seed, success=False, failed_stage="plan", reason="no grasp shared",
                          stages=[StageOutcome(stage="teach", ok=True, seconds=2.0),
                                  StageOutcome(stage="plan", ok=False, seconds=1.5, reason="no grasp shared")],

@@ -36,7 +36,7 @@ def test_bad_override_is_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture) -
 
 @pytest.mark.parametrize(("given", "means"), [(True, "ambiguous"), (False, "never"), ("always", "always")])
 def test_look_again_takes_the_old_yes_no_too(given: object, means: str) -> None:
-    from asmteach.core.pipeline import ExecutionSettings
+    from asmteach.core.config import ExecutionSettings
 
     assert ExecutionSettings.model_validate({"look_again": given}).look_again == means
 
@@ -149,7 +149,8 @@ def test_a_block_put_down_a_millimetre_off_is_seen_and_the_peg_aimed_at_it(tmp_p
 
 
 def test_a_look_stacks_the_clouds_of_several_depth_frames() -> None:
-    from asmteach.core.pipeline import ExecutionSettings, _sense
+    from asmteach.core.config import ExecutionSettings
+    from asmteach.core.pipeline import _sense
 
     class Camera:
         calls = 0

@@ -61,9 +61,25 @@ def test_a_robot_without_a_table_refuses_a_given_one(tmp_path: Path, toy_dist: P
         load_run(cfg)
 
 
-def test_a_teacher_without_a_demonstration_check_is_not_checked(tmp_path: Path, toy_dist: Path) -> None:
-    setup = load_run(_config(tmp_path, teacher={"plugin": "toy_teacher"}, demo={"anything": 1}))
+def test_a_teacher_without_demo_settings_has_no_demo_and_refuses_one(tmp_path: Path, toy_dist: Path) -> None:
+    setup = load_run(_config(tmp_path, teacher={"plugin": "toy_teacher"}))
     assert setup.demo is None
+    with pytest.raises(UserError, match=r"demo: the teacher plugin 'toy_teacher' takes no demo settings"):
+        load_run(_config(tmp_path, teacher={"plugin": "toy_teacher"}, demo={"anything": 1}))
+
+
+def test_the_table_left_out_is_none_and_the_robot_table_is_the_runs(tmp_path: Path) -> None:
+    """One owner per number: an unwritten centre/size is None in the config, the robot's value in the run."""
+    cfg = load_run_config(_config(tmp_path))
+    assert cfg.table.center is None and cfg.table.size is None
+    setup = prepare_run(cfg)
+    assert setup.table_size == (0.6, 1.2) and setup.table.height == cfg.table.height == 0.0
+
+
+def test_the_execution_section_is_typed(tmp_path: Path) -> None:
+    cfg = load_run_config(_config(tmp_path, execution={"animation": False, "scene": {"x_range": [0.3, 0.4]}}))
+    assert cfg.execution.animation is False and cfg.execution.scene.x_range == (0.3, 0.4)
+    assert cfg.execution.depth_frames == 4  # the default, from the one model
 
 
 def test_paths_are_relative_to_the_file_that_names_them(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -89,7 +89,7 @@ def test_trial_writes_its_structure_and_records_the_named_failure(tmp_path: Path
     seen: dict = {}
 
     def fake_run(cfg, out_dir, pm=None):
-        seen.update(seed=cfg.seed, animation=cfg.execution.get("animation"), out=out_dir)
+        seen.update(seed=cfg.seed, animation=cfg.execution.animation, out=out_dir)
         reason = REAL_REASONS[1][1]
         return RunReport(config={}, seed=cfg.seed, success=False, failed_stage="detect", reason=reason,
                          stages=[StageOutcome(stage="teach", ok=True, seconds=2.0),

@@ -43,6 +43,7 @@ from asmteach.plugins.detectors.aruco.insertion import (
 from asmteach.plugins.detectors.aruco.joint import CornerSet, adjust, frame_rms
 from asmteach.plugins.detectors.aruco.markers import MarkerRef, marker_table
 from asmteach.plugins.detectors.aruco.pnp import MarkerObservation, PartPose, solve_part_pose
+from asmteach.plugins.detectors.aruco.scene import DemoSettings
 
 __all__ = ["ArucoTeacher", "ArucoTeacherSettings", "FrameResult"]
 
@@ -105,6 +106,8 @@ class ArucoTeacher(Teacher):
 
     Settings = ArucoTeacherSettings
     settings: ArucoTeacherSettings
+    DemoSettings = DemoSettings
+    """The run config's ``demo`` section (the rendered demonstration), checked by the config loader."""
 
     def demonstrate(self, task: AssemblyTask, demo: dict, camera_file: Path | None = None,
                     out_dir: Path | None = None) -> tuple[list[np.ndarray], CameraIntrinsics]:
