@@ -111,10 +111,10 @@ def main() -> None:
     from asmteach.core.config import TableSettings
     from asmteach.core.corpus import part_corpus
     from asmteach.core.parts import PartSpec, build_part
+    from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
     from asmteach.core.symmetry import equivalent_transforms, nearest_equivalent_error
     from asmteach.plugins.detectors.cvfh.corpus_measure import rest_poses, scene_pose
     from asmteach.plugins.detectors.cvfh.scenes import default_camera_pose, render_table_scene
-    from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings
 
     mi = load_make_inputs(MAKE_INPUTS)
     corpus = part_corpus(seed=args.seed)

@@ -5,9 +5,9 @@ Run: .venv/bin/python benchmarks/mosd_segmentation.py [--data ../shared/data] [-
 Reads ``real/kinect/mosd/*.pcd`` in place (never copies them). Each scene goes through the front end as
 a user's cloud would: the camera-frame cloud is put in a table frame (z up) from the table plane it
 shows (:func:`asmteach.core.clouds.to_world`), then the detectors' front end
-(:func:`asmteach.plugins.detectors.cvfh.segment.label_scene`: table plane, points above it, clusters)
+(:func:`asmteach.core.perception.scene_labels.label_scene`: table plane, points above it, clusters)
 labels every point. The labels are scored against mOSD's
-(:mod:`asmteach.plugins.detectors.cvfh.segment_score`) four ways: with the detectors' default settings
+(:mod:`asmteach.core.perception.segment_score`) four ways: with the detectors' default settings
 (Euclidean clusters only) and with ``split_concave`` (clusters cut at concave creases, for touching
 objects), ``split_concave, 5 sigma``: with a table threshold of 5 Kinect depth-noise sigmas (``--sigmas``)
 at each point's range, and ``scenes``: that with heights measured from the table around each point
@@ -27,8 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from asmteach.core.clouds import Cloud, read_cloud, to_world
-from asmteach.plugins.detectors.cvfh.segment import SegmentSettings, image_index, label_scene
-from asmteach.plugins.detectors.cvfh.segment_score import IGNORE, SceneScore, mosd_truth, score_segmentation
+from asmteach.core.perception.scene_labels import image_index, label_scene
+from asmteach.core.perception.segment_score import IGNORE, SceneScore, mosd_truth, score_segmentation
+from asmteach.core.perception.segmentation import SegmentSettings
 
 ROOT = Path(__file__).resolve().parents[1]
 # The Kinect v1 intrinsics of the mOSD clouds (640x480; measured from the organized files: the points

@@ -1,7 +1,7 @@
 """The one point-cloud reader: PCD (ascii, binary, binary_compressed), PLY and XYZ, units, and frames.
 
 :func:`read_cloud` reads the scenes ``asmteach detect`` is given (real Kinect files as well as our own
-renders, :func:`asmteach.plugins.detectors.depth_camera.write_cloud_ply`) and a part's model given as a
+renders, :func:`asmteach.core.perception.depth_camera.write_cloud_ply`) and a part's model given as a
 scan (:func:`asmteach.core.parts.build_cloud_part`).
 
 What a file may hold, and what comes back (:class:`Cloud`):

@@ -13,7 +13,7 @@ import pytest
 import asmteach.core  # noqa: F401  (libusb before open3d)
 from asmteach.core import clouds, geometry
 from asmteach.core.errors import UserError
-from asmteach.plugins.detectors.depth_camera import look_at, write_cloud_ply
+from asmteach.core.perception.depth_camera import look_at, write_cloud_ply
 
 import open3d as o3d  # isort: skip
 

@@ -55,7 +55,7 @@ from asmteach.core.interfaces import Corrector, Detector, PartModel
 from asmteach.core.io import check_out_file, read_yaml, write_json
 from asmteach.core.models import Detection, TablePlane
 from asmteach.core.parts import load_parts
-from asmteach.plugins.detectors.cvfh.detector import NO_VIEWPOINT
+from asmteach.core.perception.viewpoint import NO_VIEWPOINT
 
 __all__ = ["SceneCloud", "asmteach_add_commands", "detection_report", "load_cloud", "place_cloud", "run_detection"]
 

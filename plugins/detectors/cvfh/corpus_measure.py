@@ -24,9 +24,9 @@ from asmteach.core import registry
 from asmteach.core.config import TableSettings
 from asmteach.core.hooks import hookimpl
 from asmteach.core.interfaces import Detector, PartModel
+from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
 from asmteach.core.symmetry import equivalent_transforms, nearest_equivalent_error
 from asmteach.plugins.detectors.cvfh.scenes import default_camera_pose, place_on_table, render_table_scene
-from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings
 
 __all__ = ["AREA", "asmteach_measure_part", "rest_poses", "run_part", "scene_pose"]
 

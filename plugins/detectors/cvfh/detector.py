@@ -16,7 +16,7 @@ Pipeline (paper, "Rough detection using point cloud"), all in the world frame
    whether they rest on the table, refine the best with point-to-plane ICP
    (coarse on a subsample for ten, fine for the best four), and verify them
    (fitness, inlier RMSE, free-space violations, the model surface the
-   camera should see, support on the table: :func:`~.refine.verify`); the
+   camera should see, support on the table: :func:`~asmteach.core.perception.registration.verify`); the
    best verified one is the rough pose. When none verifies, the next ten
    hypotheses get their turn (``max_rounds``);
 4. when no CVFH hypothesis verifies, the part's stable rests on the table at
@@ -48,32 +48,33 @@ import numpy as np
 from pydantic import Field
 
 from asmteach.core import geometry
-from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Detector, PartModel
 from asmteach.core.models import Detection, StrictModel, TablePlane, Vec3
-from asmteach.core.symmetry import part_symmetries
-from asmteach.plugins.detectors.cvfh.refine import (
+from asmteach.core.perception.depth_camera import KinectSettings, look_at
+from asmteach.core.perception.open3d_tools import one_thread, to_o3d
+from asmteach.core.perception.registration import (
     ModelCloud,
     RefineSettings,
     Verdict,
     icp_refine,
     model_cloud,
-    one_thread,
     verify,
 )
+from asmteach.core.perception.segmentation import (
+    SegmentSettings,
+    check_cloud,
+    cluster_objects,
+    merge_nearby,
+    remove_table,
+)
+from asmteach.core.perception.viewpoint import StageClock, resolve_viewpoint
+from asmteach.core.symmetry import part_symmetries
 from asmteach.plugins.detectors.cvfh.resting import (
     disagreement,
     hull_twins,
     near_twins,
     resting_hypotheses,
     stable_rests,
-)
-from asmteach.plugins.detectors.cvfh.segment import (
-    SegmentSettings,
-    check_cloud,
-    cluster_objects,
-    merge_nearby,
-    remove_table,
 )
 from asmteach.plugins.detectors.cvfh.views import (
     CloudDescription,
@@ -83,38 +84,8 @@ from asmteach.plugins.detectors.cvfh.views import (
     describe_cloud,
     load_or_build,
 )
-from asmteach.plugins.detectors.depth_camera import KinectSettings, look_at
 
-__all__ = ["NO_VIEWPOINT", "CvfhIcpDetector", "StageClock", "resolve_viewpoint"]
-
-NO_VIEWPOINT = (
-    "no camera position: give --viewpoint X Y Z (camera centre, world frame, metres), a PCD whose VIEWPOINT "
-    "header holds it, a PLY written by asmteach's renderer ('comment viewpoint X Y Z'), or the detector's "
-    "viewpoint setting in the config"
-)
-"""The :class:`UserError` message when no source gives the camera centre."""
-
-
-def resolve_viewpoint(viewpoint: np.ndarray | None, setting: np.ndarray | None) -> np.ndarray:
-    """The camera centre to use (world frame, metres): ``viewpoint`` when given, else the ``setting``.
-
-    There is no built-in default: the viewpoint orients the descriptors and
-    casts the verification's rays, and a guessed camera makes every right
-    pose look wrong. Raises :class:`UserError` when neither is given, for
-    anything but three finite numbers, or for a camera farther than 20 m from
-    the world origin (a viewpoint in millimetres).
-    """
-    if viewpoint is None and setting is None:
-        raise UserError(NO_VIEWPOINT)
-    eye = np.asarray(setting if viewpoint is None else viewpoint, dtype=float)
-    if eye.shape != (3,) or not np.all(np.isfinite(eye)):
-        raise UserError(f"viewpoint must be 3 finite numbers (camera centre, world frame, metres), got {eye.tolist()}")
-    if float(np.linalg.norm(eye)) > 20.0:
-        raise UserError(
-            f"viewpoint {eye.tolist()} is {np.linalg.norm(eye):.0f} m from the origin: give it in metres, not mm"
-        )
-    return eye
-
+__all__ = ["CvfhIcpDetector"]
 
 class CvfhSettings(StrictModel):
     """Settings of the ``cvfh_icp`` detector."""
@@ -173,34 +144,6 @@ class CvfhSettings(StrictModel):
     near_off: float = Field(0.006, gt=0.0, description="near twins: a pose clearly fails a point beyond this")
     distinct_mm: float = Field(5.0, gt=0.0, description="poses farther apart than this (mm) are distinct")
     distinct_deg: float = Field(5.0, gt=0.0, description="poses turned further apart than this (deg) are distinct")
-
-
-class StageClock:
-    """Wall time per stage in milliseconds (``perf_counter``), plus the process CPU time of it all.
-
-    ``cpu`` (process CPU time, all threads) is reported next to the wall-clock
-    ``total`` because on a shared machine the wall clock also counts other
-    people's work; with one thread the CPU time is what an idle core needs.
-    """
-
-    def __init__(self) -> None:
-        self.ms: dict[str, float] = {}
-        self._t = time.perf_counter()
-        self._start = self._t
-        self._cpu = time.process_time()
-
-    def lap(self, stage: str) -> None:
-        """Charge the time since the previous lap to ``stage``."""
-        now = time.perf_counter()
-        self.ms[stage] = self.ms.get(stage, 0.0) + 1000.0 * (now - self._t)
-        self._t = now
-
-    def done(self) -> dict[str, float]:
-        """Stage times plus ``total`` (wall) and ``cpu``, rounded to 0.01 ms."""
-        out = {k: round(v, 2) for k, v in self.ms.items()}
-        out["total"] = round(1000.0 * (time.perf_counter() - self._start), 2)
-        out["cpu"] = round(1000.0 * (time.process_time() - self._cpu), 2)
-        return out
 
 
 @dataclass
@@ -618,8 +561,6 @@ def _up_for(direction: np.ndarray) -> np.ndarray:
 
 
 def _down(points: np.ndarray, voxel: float) -> np.ndarray:
-    from asmteach.plugins.detectors.cvfh.segment import to_o3d
-
     return np.asarray(to_o3d(points).voxel_down_sample(voxel).points)
 
 

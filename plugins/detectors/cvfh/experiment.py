@@ -38,11 +38,11 @@ from asmteach.core.interfaces import Corrector, Detector, PartModel
 from asmteach.core.io import write_text
 from asmteach.core.models import Placement, StrictModel, TablePlane
 from asmteach.core.parts import build_part, load_structure
+from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
 from asmteach.core.sweep import Experiment, to_csv, to_markdown
 from asmteach.core.symmetry import part_symmetries
 from asmteach.plugins.detectors.cvfh.commands import run_detection
 from asmteach.plugins.detectors.cvfh.scenes import QUARTERS, default_camera_pose, place_on_table, render_table_scene
-from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings
 
 __all__ = ["DetectionPrecision", "part_symmetries", "pose_errors"]
 
@@ -395,4 +395,4 @@ def _targets(stats: list[dict[str, Any]]) -> str:
         out += line(f"median detection time <= 150 ms ({what})", value, (value or 1e9) <= 150)
         if fp is not None and fp.get(key) is not None:
             out += line(f"no slower than fpfh_ransac ({what}: {fp[key]} ms)", value, (value or 1e9) <= fp[key])
-    return out + "\nAll scenes are synthetic (the virtual Kinect v1 of asmteach.plugins.detectors.depth_camera).\n"
+    return out + "\nAll scenes are synthetic (the virtual Kinect v1 of asmteach.core.perception.depth_camera).\n"

@@ -38,8 +38,8 @@ from scipy.spatial.transform import Rotation
 import asmteach.core  # noqa: F401  (loads libusb before open3d)
 from asmteach.core import geometry
 from asmteach.core.models import TablePlane
+from asmteach.core.perception.registration import ModelCloud, ray_depths
 from asmteach.core.symmetry import part_symmetries
-from asmteach.plugins.detectors.cvfh.refine import ModelCloud, ray_depths
 
 import open3d as o3d  # isort: skip
 

@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike
 from asmteach.core import geometry
 from asmteach.core.config import TableSettings
 from asmteach.core.models import TablePlane
-from asmteach.plugins.detectors.depth_camera import DepthCamera, DepthFrame, look_at
+from asmteach.core.perception.depth_camera import DepthCamera, DepthFrame, look_at
 
 __all__ = [
     "DEFAULT_EYE",

@@ -32,8 +32,8 @@ from asmteach.core import geometry
 from asmteach.core.errors import UserError
 from asmteach.core.io import atomic_path, cache_root
 from asmteach.core.models import StrictModel
-from asmteach.plugins.detectors.cvfh.segment import to_o3d
-from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings, look_at
+from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings, look_at
+from asmteach.core.perception.segmentation import to_o3d
 
 __all__ = [
     "DB_VERSION",

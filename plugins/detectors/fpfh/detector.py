@@ -25,25 +25,24 @@ import asmteach.core  # noqa: F401  (loads libusb before open3d)
 from asmteach.core import geometry
 from asmteach.core.interfaces import Detector, PartModel
 from asmteach.core.models import Detection, StrictModel, TablePlane, Vec3
-from asmteach.plugins.detectors.cvfh.detector import StageClock, resolve_viewpoint
-from asmteach.plugins.detectors.cvfh.refine import (
+from asmteach.core.perception.open3d_tools import one_thread, to_o3d
+from asmteach.core.perception.registration import (
     ModelCloud,
     RefineSettings,
     Verdict,
     icp_refine,
     model_cloud,
-    one_thread,
     ray_plane,
     verify,
 )
-from asmteach.plugins.detectors.cvfh.segment import (
+from asmteach.core.perception.segmentation import (
     SegmentSettings,
     check_cloud,
     cluster_objects,
     merge_nearby,
     remove_table,
-    to_o3d,
 )
+from asmteach.core.perception.viewpoint import StageClock, resolve_viewpoint
 
 import open3d as o3d  # isort: skip
 
@@ -308,7 +307,7 @@ def _along_rays(points: np.ndarray, context: np.ndarray, eye: np.ndarray, s: Ref
     """(coverage, contradicted) of model ``points`` (world) against the seen ``context`` along rays from ``eye``.
 
     Each point's nearest observed ray within ``s.ray_radius`` (rays as points of a plane 1 m in front of
-    the eye, as :func:`~asmteach.plugins.detectors.cvfh.refine.surface_check` does); points without one,
+    the eye, as :func:`~asmteach.core.perception.registration.surface_check` does); points without one,
     or hidden by something nearer, give no evidence. ``(0, 1)`` when nothing can be judged.
     """
     from scipy.spatial import cKDTree

@@ -307,7 +307,7 @@ class ArmRobot(Robot):
 
     def camera_pose(self) -> np.ndarray:
         """``T_world_cam`` (OpenCV frame) of the simulated depth and RGB cameras."""
-        from asmteach.plugins.detectors.depth_camera import look_at
+        from asmteach.core.perception.depth_camera import look_at
 
         c, h = self.settings.camera, self._table.height
         return look_at([c.eye[0], c.eye[1], h + c.eye[2]], [c.target[0], c.target[1], h + c.target[2]])
@@ -342,7 +342,7 @@ class ArmRobot(Robot):
         Uses the project's one depth-camera model
         (:mod:`asmteach.plugins.detectors.depth_camera`) at :meth:`camera_pose`.
         """
-        from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings
+        from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
 
         if not hasattr(self, "_depth_cam"):
             self._depth_cam = DepthCamera(KinectSettings(), seed=self.seed)
@@ -355,7 +355,7 @@ class ArmRobot(Robot):
 
     def sense_rgb(self) -> np.ndarray:
         """RGB image ``(480, 640, 3) uint8`` from the same camera pose (PyBullet TinyRenderer)."""
-        from asmteach.plugins.detectors.depth_camera import KinectSettings
+        from asmteach.core.perception.depth_camera import KinectSettings
 
         k = KinectSettings()
         return self.sim.rgb(self.camera_pose(), k.width, k.height, k.fx, k.fy, k.cx, k.cy)

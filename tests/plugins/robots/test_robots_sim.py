@@ -161,7 +161,7 @@ def test_arm_settles_where_commanded_to_a_fraction_of_a_peg_clearance() -> None:
 
 @pytest.mark.slow
 def test_cameras_see_the_table_and_part() -> None:
-    pytest.importorskip("asmteach.plugins.detectors.depth_camera")
+    pytest.importorskip("asmteach.core.perception.depth_camera")
     with NextagePyBullet({}) as robot:
         T_box = np.eye(4)
         T_box[:3, 3] = [0.45, 0.0, 0.03]

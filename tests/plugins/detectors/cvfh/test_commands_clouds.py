@@ -13,8 +13,8 @@ from asmteach.core import clouds, geometry
 from asmteach.core.cli import main
 from asmteach.core.config import TableSettings
 from asmteach.core.parts import build_part, load_structure
+from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
 from asmteach.plugins.detectors.cvfh.scenes import place_on_table, render_table_scene
-from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings
 
 REPO = Path(__file__).resolve().parents[4]
 STRUCTURE = REPO / "configs/parts/set1/l_corner.yaml"

@@ -11,6 +11,7 @@ from asmteach.core import geometry, registry
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Placement, TablePlane
 from asmteach.core.parts import build_part, load_structure
+from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings, look_at
 from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
 from asmteach.plugins.detectors.cvfh.scenes import DEFAULT_EYE, TableScene, place_on_table, render_table_scene
 from asmteach.plugins.detectors.cvfh.views import (
@@ -21,7 +22,6 @@ from asmteach.plugins.detectors.cvfh.views import (
     describe_cloud,
     load_or_build,
 )
-from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings, look_at
 
 REPO = Path(__file__).resolve().parents[4]
 

@@ -12,8 +12,8 @@ import asmteach.core  # noqa: F401  (libusb before open3d)
 from asmteach.core import geometry
 from asmteach.core.cli import main
 from asmteach.core.parts import build_part, load_structure
+from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings, write_cloud_ply
 from asmteach.plugins.detectors.cvfh.scenes import DEFAULT_EYE, place_on_table, render_table_scene
-from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings, write_cloud_ply
 
 import open3d as o3d  # isort: skip
 

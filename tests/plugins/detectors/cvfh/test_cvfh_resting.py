@@ -11,10 +11,10 @@ import trimesh
 from asmteach.core import geometry
 from asmteach.core.interfaces import PartModel
 from asmteach.core.parts import build_part, load_structure
+from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings, look_at
 from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
 from asmteach.plugins.detectors.cvfh.resting import Disagreement, hull_twins, stable_rests
 from asmteach.plugins.detectors.cvfh.scenes import default_camera_pose, place_on_table, render_table_scene
-from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings, look_at
 
 REPO = Path(__file__).resolve().parents[4]
 

@@ -10,10 +10,10 @@ from scipy.spatial import cKDTree
 
 from asmteach.core import geometry
 from asmteach.core.corpus import corpus_part
+from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
+from asmteach.core.perception.registration import ModelCloud, RefineSettings, model_cloud, ray_depths, surface_check
 from asmteach.plugins.detectors.cvfh.detector import _near_shares
-from asmteach.plugins.detectors.cvfh.refine import ModelCloud, RefineSettings, model_cloud, ray_depths, surface_check
 from asmteach.plugins.detectors.cvfh.scenes import DEFAULT_EYE, default_camera_pose, place_on_table, render_table_scene
-from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings
 
 
 @pytest.fixture(scope="module")

@@ -13,9 +13,10 @@ from asmteach.core.corpus import corpus_part
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import TablePlane
 from asmteach.core.parts import PartSpec, build_part
+from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
+from asmteach.core.perception.registration import RefineSettings, icp_refine, model_cloud, surface_check, verify
 from asmteach.core.symmetry import part_symmetries
 from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
-from asmteach.plugins.detectors.cvfh.refine import RefineSettings, icp_refine, model_cloud, surface_check, verify
 from asmteach.plugins.detectors.cvfh.resting import near_twins
 from asmteach.plugins.detectors.cvfh.scenes import (
     DEFAULT_EYE,
@@ -23,7 +24,6 @@ from asmteach.plugins.detectors.cvfh.scenes import (
     place_on_table,
     render_table_scene,
 )
-from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings
 
 
 @pytest.fixture(scope="module")

@@ -16,10 +16,11 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Placement
 from asmteach.core.parts import build_part, load_structure
+from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings, look_at
+from asmteach.core.perception.viewpoint import NO_VIEWPOINT
 from asmteach.plugins.detectors.cvfh.commands import run_detection
-from asmteach.plugins.detectors.cvfh.detector import NO_VIEWPOINT, CvfhIcpDetector
+from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
 from asmteach.plugins.detectors.cvfh.scenes import TableScene, place_on_table, render_table_scene
-from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings, look_at
 from asmteach.plugins.planners.placements.corrector import StablePlacementCorrector
 
 import open3d as o3d  # isort: skip

@@ -11,8 +11,8 @@ from asmteach.core import geometry, registry
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
 from asmteach.core.parts import build_part, load_structure
+from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
 from asmteach.plugins.detectors.cvfh.scenes import DEFAULT_EYE, place_on_table, render_table_scene
-from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings
 from asmteach.plugins.detectors.fpfh.detector import FpfhRansacDetector
 
 REPO = Path(__file__).resolve().parents[4]

@@ -120,7 +120,7 @@ def test_scan_as_a_part_file(tmp_path: Path) -> None:
     assert np.allclose(part.mesh.extents, (0.06, 0.04, 0.03), atol=1e-3)
     box.export(tmp_path / "mesh.ply")
     assert load_parts(tmp_path / "mesh.ply", scans=True)[0].points is None
-    from asmteach.plugins.detectors.depth_camera import write_cloud_ply
+    from asmteach.core.perception.depth_camera import write_cloud_ply
 
     assert load_parts(write_cloud_ply(tmp_path / "cloud.ply", pts), scans=True)[0].points is not None
     # A scan in millimetres given as metres, and a flat one: one line each.

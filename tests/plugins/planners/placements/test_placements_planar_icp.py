@@ -8,8 +8,8 @@ import trimesh
 
 from asmteach.core import geometry
 from asmteach.core.config import TableSettings
+from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings, look_at
 from asmteach.plugins.detectors.cvfh.scenes import render_table_scene
-from asmteach.plugins.detectors.depth_camera import DepthCamera, KinectSettings, look_at
 from asmteach.plugins.planners.placements.planar_icp import ModelSurface, planar_icp
 
 EYE = np.array([-0.05, 0.0, 0.70])

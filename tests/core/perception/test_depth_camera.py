@@ -10,7 +10,7 @@ import pytest
 import trimesh
 
 from asmteach.core import geometry
-from asmteach.plugins.detectors.depth_camera import (
+from asmteach.core.perception.depth_camera import (
     DepthCamera,
     KinectSettings,
     look_at,

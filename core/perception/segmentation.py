@@ -6,12 +6,14 @@ Every failure is returned as a reason string (the detector reports
 detection, not a crash.
 
 The detectors call :func:`check_cloud`, :func:`remove_table`, :func:`cluster_objects`
-and :func:`merge_nearby`. :func:`label_scene` runs the same front end and labels
-every point (what ``segment_score`` and ``benchmarks/mosd_segmentation.py`` score
-on real Kinect scenes); for scenes of unknown objects it can also cut clusters at
-concave creases (:func:`split_concave`), drop an organized cloud's mixed pixels
-(:func:`mixed_pixels`) and raise the table threshold with the depth noise
-(``min_height_sigmas``). Those are off in the detectors' defaults.
+and :func:`merge_nearby`. :func:`~asmteach.core.perception.scene_labels.label_scene`
+runs the same front end and labels every point (what
+:mod:`~asmteach.core.perception.segment_score` and ``benchmarks/mosd_segmentation.py``
+score on real Kinect scenes); for scenes of unknown objects it can also cut clusters at
+concave creases (:func:`~asmteach.core.perception.concave.split_concave`), drop an
+organized cloud's mixed pixels (:func:`~asmteach.core.perception.scene_labels.mixed_pixels`)
+and raise the table threshold with the depth noise (``min_height_sigmas``). Those are
+off in the detectors' defaults.
 """
 
 from __future__ import annotations
@@ -23,21 +25,21 @@ from pydantic import Field
 
 import asmteach.core  # noqa: F401  (loads libusb before open3d)
 from asmteach.core.models import StrictModel, TablePlane
+from asmteach.core.perception.concave import split_concave
+from asmteach.core.perception.open3d_tools import one_thread, to_o3d
 
 import open3d as o3d  # isort: skip
 
 __all__ = [
     "Scene",
     "SegmentSettings",
+    "above_mask",
     "check_cloud",
+    "cluster_labels",
     "cluster_objects",
-    "image_index",
-    "label_scene",
+    "heights",
     "merge_nearby",
-    "mixed_pixels",
     "remove_table",
-    "split_concave",
-    "to_o3d",
     "voxelize",
 ]
 
@@ -137,14 +139,6 @@ class Scene:
     """Candidate objects, largest first: (k, 3) points each (voxel-downsampled)."""
 
 
-def to_o3d(points: np.ndarray, normals: np.ndarray | None = None) -> o3d.geometry.PointCloud:
-    """An Open3D point cloud of ``(n, 3)`` points (and normals)."""
-    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64)))
-    if normals is not None:
-        pc.normals = o3d.utility.Vector3dVector(np.ascontiguousarray(normals, dtype=np.float64))
-    return pc
-
-
 def check_cloud(cloud: np.ndarray) -> tuple[np.ndarray | None, str | None]:
     """Drop non-finite rows; return ``(points, None)`` or ``(None, reason)``."""
     arr = np.asarray(cloud, dtype=float)
@@ -184,7 +178,7 @@ def remove_table(
         table, reason = _fit_table(points, settings, seed)
         if table is None:
             return None, None, reason
-    above = points[_above_mask(points, table, settings, viewpoint)]
+    above = points[above_mask(points, table, settings, viewpoint)]
     if len(above) < settings.min_cluster_points:
         return (
             table,
@@ -203,8 +197,6 @@ def _fit_table(points: np.ndarray, s: SegmentSettings, seed: int) -> tuple[Table
     down = to_o3d(points).voxel_down_sample(s.plane_voxel)
     if len(down.points) < 3:
         return None, "no table plane: the cloud collapses to fewer than 3 voxels"
-    from asmteach.plugins.detectors.cvfh.refine import one_thread  # refine imports this module
-
     # Open3D's RANSAC draws from its own global generator; seeded and on one thread it repeats.
     o3d.utility.random.seed(int(seed))
     with one_thread():
@@ -264,8 +256,8 @@ def voxelize(points: np.ndarray, voxel: float) -> tuple[np.ndarray, np.ndarray]:
     return centres, inverse
 
 
-def _cluster_labels(pts: np.ndarray, settings: SegmentSettings, viewpoint: np.ndarray | None) -> np.ndarray:
-    """Per voxel centre: its cluster (0 = largest, ...) or -1 (noise, too small)."""
+def cluster_labels(pts: np.ndarray, settings: SegmentSettings, viewpoint: np.ndarray | None) -> np.ndarray:
+    """Per voxel centre (``(n, 3)``, world frame, metres): its cluster (0 = largest, ...) or -1 (noise, too small)."""
     if len(pts) < settings.min_cluster_points:
         return np.full(len(pts), -1, dtype=np.int64)
     labels = np.asarray(to_o3d(pts).cluster_dbscan(settings.cluster_eps, settings.cluster_min_points))
@@ -297,113 +289,23 @@ def cluster_objects(
     ``viewpoint`` (camera centre, world frame, metres) orients the normals that needs.
     """
     pts, _ = voxelize(above, settings.cluster_voxel)
-    labels = _cluster_labels(pts, settings, viewpoint)
+    labels = cluster_labels(pts, settings, viewpoint)
     return [pts[labels == k] for k in range(int(labels.max()) + 1)]
 
 
-def label_scene(
-    points: np.ndarray,
-    settings: SegmentSettings,
-    *,
-    table: TablePlane | None = None,
-    seed: int = 0,
-    viewpoint: np.ndarray | None = None,
-    image_shape: tuple[int, int] | None = None,
-) -> tuple[TablePlane | None, np.ndarray, str | None]:
-    """The whole front end as per-point labels: ``(table, labels, reason)``.
-
-    ``points`` is ``(n, 3)``, world frame (z up), metres; NaN rows are allowed (an organized cloud's
-    missing returns) and labelled 0. ``labels[i]`` is 0 for points in no object (no return, table, too
-    high, noise) and ``k >= 1`` for the ``k``-th cluster of :func:`cluster_objects` (largest first): every
-    point gets the cluster of its voxel. ``reason`` says why there is no table or nothing on it.
-
-    ``image_shape`` ``(height, width)`` says the points are an organized cloud's pixels, row by row; with a
-    ``viewpoint`` its mixed pixels (:func:`mixed_pixels`) are then left out of the objects.
-    """
-    pts_all = np.asarray(points, dtype=float)
-    labels = np.zeros(len(pts_all), dtype=np.int64)
-    finite = np.flatnonzero(np.all(np.isfinite(pts_all), axis=1)) if pts_all.ndim == 2 else np.zeros(0, int)
-    pts, reason = check_cloud(pts_all)
-    if pts is None:
-        return None, labels, reason
-    table, above, reason = remove_table(pts, settings, table=table, seed=seed, viewpoint=viewpoint)
-    if table is None or above is None:
-        return table, labels, reason
-    keep = _above_mask(pts, table, settings, viewpoint)
-    if image_shape is not None and viewpoint is not None and settings.mixed_pixel_sigmas > 0:
-        hh, ww = image_shape
-        if hh * ww != len(pts_all):
-            raise ValueError(f"image_shape {image_shape} does not match {len(pts_all)} points")
-        mixed = mixed_pixels(pts_all.reshape(hh, ww, 3), viewpoint, settings.mixed_pixel_sigmas).reshape(-1)
-        keep &= ~mixed[finite]
-    idx = finite[keep]
-    centres, inverse = voxelize(pts_all[idx], settings.cluster_voxel)
-    vox = _cluster_labels(centres, settings, viewpoint)
-    labels[idx] = vox[inverse] + 1
-    return table, labels, None
-
-
-def _heights(points: np.ndarray, table: TablePlane) -> np.ndarray:
+def heights(points: np.ndarray, table: TablePlane) -> np.ndarray:
+    """Signed height of each ``(n, 3)`` point above the ``table`` plane (metres, along its unit normal)."""
     n = np.asarray(table.normal, dtype=float)
     return points @ (n / np.linalg.norm(n)) - table.height
 
 
-def image_index(
-    points_cam: np.ndarray, fx: float, fy: float, cx: float, cy: float, width: int, height: int
-) -> np.ndarray:
-    """Per point its pixel in a ``height x width`` image (row-major index), or -1 (no return, outside).
-
-    Puts an unorganized camera-frame cloud (OpenCV frame, metres) back on its sensor's image grid through
-    the pinhole intrinsics (pixels), so organized-cloud steps (:func:`mixed_pixels`) apply to it.
-    """
-    p = np.asarray(points_cam, dtype=float)
-    out = np.full(len(p), -1, dtype=np.int64)
-    ok = np.all(np.isfinite(p), axis=1) & (p[:, 2] > 0)
-    u = np.round(fx * p[ok, 0] / p[ok, 2] + cx).astype(np.int64)
-    v = np.round(fy * p[ok, 1] / p[ok, 2] + cy).astype(np.int64)
-    inside = (u >= 0) & (u < width) & (v >= 0) & (v < height)
-    idx = np.flatnonzero(ok)[inside]
-    out[idx] = v[inside] * width + u[inside]
-    return out
-
-
-def mixed_pixels(grid: np.ndarray, viewpoint: np.ndarray, sigmas: float = 3.0) -> np.ndarray:
-    """``(h, w) bool``: the mixed pixels of an organized cloud ``grid`` (``(h, w, 3)``, metres, NaN = no return).
-
-    A depth sensor's pixel on a depth edge mixes foreground and background and lands between them: a point
-    floating in front of the background, near neither surface (on a real Kinect it sticks to the table
-    beside an object, up to ~2 cm above it). Along a row or a column such a pixel ``p`` steps in range by
-    more than ``sigmas`` depth-noise sigmas (:func:`asmteach.core.clouds.depth_sigma` at its range from
-    ``viewpoint``, the camera centre in the grid's frame) to both neighbours, in the same direction, while
-    each neighbour's own next step is less than half of that (flat ground on both sides: a steep surface
-    steps evenly and is kept).
-    """
-    from asmteach.core.clouds import depth_sigma
-
-    g = np.asarray(grid, dtype=float)
-    r = np.linalg.norm(g - np.asarray(viewpoint, dtype=float), axis=2)  # NaN where no return
-    tau = sigmas * depth_sigma(r)
-    out = np.zeros(r.shape, dtype=bool)
-    with np.errstate(invalid="ignore"):
-        for rr in (r, r.T):
-            t = tau if rr is r else tau.T
-            a2, a1, c, b1, b2 = rr[:, :-4], rr[:, 1:-3], rr[:, 2:-2], rr[:, 3:-1], rr[:, 4:]
-            d1, d2 = c - a1, b1 - c
-            step = (np.abs(d1) > t[:, 2:-2]) & (np.abs(d2) > t[:, 2:-2]) & (np.sign(d1) == np.sign(d2))
-            flat = (np.abs(a1 - a2) < 0.5 * np.abs(d1)) & (np.abs(b2 - b1) < 0.5 * np.abs(d2))
-            hit = np.zeros(rr.shape, dtype=bool)
-            hit[:, 2:-2] = step & flat
-            out |= hit if rr is r else hit.T
-    return out
-
-
-def _above_mask(
+def above_mask(
     points: np.ndarray, table: TablePlane, settings: SegmentSettings, viewpoint: np.ndarray | None
 ) -> np.ndarray:
     """Points between the lowest object height (min_height, or the depth noise there) and max_height."""
     from asmteach.core.clouds import depth_sigma
 
-    h = _heights(points, table)
+    h = heights(points, table)
     low = np.full(len(points), settings.min_height)
     if viewpoint is not None and settings.min_height_sigmas > 0:
         rng = np.linalg.norm(points - np.asarray(viewpoint, dtype=float), axis=1)
@@ -449,132 +351,6 @@ def _local_table(
             acc += (w * med[np.maximum(k, 0)])[back]
             wsum += w[back]
     return np.where(wsum > 0, acc / np.maximum(wsum, 1e-12), 0.0)
-
-
-def _normals(
-    pts: np.ndarray, radius: float, viewpoint: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Unit normals toward the viewpoint (else away from the centroid) and surface variation per point."""
-    pc = to_o3d(pts)
-    param = o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=40)
-    pc.estimate_normals(param)
-    pc.estimate_covariances(param)
-    ev = np.linalg.eigvalsh(np.asarray(pc.covariances))  # ascending
-    curv = ev[:, 0] / np.maximum(ev.sum(axis=1), 1e-18)
-    nrm = np.asarray(pc.normals)
-    # A surface seen by the camera faces it; without a camera, a convex object faces away from its middle.
-    toward = (np.asarray(viewpoint, dtype=float) - pts) if viewpoint is not None else (pts - pts.mean(axis=0))
-    flip = np.einsum("ij,ij->i", nrm, toward) < 0
-    nrm = np.where(flip[:, None], -nrm, nrm)
-    return nrm, curv
-
-
-def split_concave(
-    pts: np.ndarray, settings: SegmentSettings, *, viewpoint: np.ndarray | None = None
-) -> np.ndarray:
-    """Cut one cluster at its concave creases; per point a segment id (0, 1, ...) or -1.
-
-    A model-free cut for objects that touch (Stein et al.'s LCCP idea on smooth regions instead of
-    supervoxels): points grow smooth regions through neighbours (within ``2.5 cluster_voxel``) whose
-    normals differ by less than ``smooth_angle_deg`` and that are no crease (surface variation below
-    ``max_curvature``, and ``crease_rings`` neighbour steps from any point above it); creases and tiny
-    regions join their neighbours; then adjacent regions merge unless
-    the boundary between them is concave - the normals of their points near it (``patch_radius``) turn
-    toward each other by more than ``concave_angle_deg``. Two faces of one box meet at a convex edge, a box
-    standing on another or a cup against a bowl at a concave one. ``pts`` is ``(n, 3)`` metres, any frame
-    with ``viewpoint`` (the camera centre) in it; normals are oriented toward it.
-    """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
-
-    n = len(pts)
-    if n < 3:
-        return np.full(n, -1, dtype=np.int64)
-    s = settings
-    nrm, curv = _normals(pts, s.normal_radius, viewpoint)
-    tree = cKDTree(pts)
-    edges = tree.query_pairs(2.5 * s.cluster_voxel, output_type="ndarray")
-    if len(edges) == 0:
-        return np.zeros(n, dtype=np.int64)
-    a, b = edges[:, 0], edges[:, 1]
-    # A point grows regions only if no crease is within crease_rings neighbour steps: the widened band keeps
-    # a few noisy crease points that fall just under max_curvature from bridging two objects.
-    near_crease = curv > s.max_curvature
-    for _ in range(s.crease_rings):
-        ring = near_crease.copy()
-        ring[a[near_crease[b]]] = True
-        ring[b[near_crease[a]]] = True
-        near_crease = ring
-    flat = ~near_crease
-    cos_s = np.cos(np.radians(s.smooth_angle_deg))
-    smooth = flat[a] & flat[b] & (np.einsum("ij,ij->i", nrm[a], nrm[b]) >= cos_s)
-
-    def components(ea: np.ndarray, eb: np.ndarray) -> np.ndarray:
-        g = coo_matrix((np.ones(len(ea)), (ea, eb)), shape=(n, n))
-        return connected_components(g, directed=False)[1]
-
-    region = components(a[smooth], b[smooth])
-    core = flat.copy()
-    # Crease points (and isolated flat ones) take the region of their nearest core point.
-    sizes = np.bincount(region)
-    core &= sizes[region] > 1
-    if not core.any():
-        return np.zeros(n, dtype=np.int64)
-    ci = np.flatnonzero(core)
-    _, j = cKDTree(pts[ci]).query(pts[~core])
-    region[~core] = region[ci[j]]
-    region = np.unique(region, return_inverse=True)[1].reshape(-1)
-
-    parent = np.arange(region.max() + 1)
-
-    def find(x: int) -> int:
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
-
-    ra, rb = region[a], region[b]
-    cross = ra != rb
-    pair_keys, pair_count = np.unique(np.sort(np.stack([ra[cross], rb[cross]], 1), axis=1), axis=0, return_counts=True)
-    sizes = np.bincount(region)
-    # Tiny regions (noise, the strip along a crease) join the neighbour they share most edges with.
-    small = sizes < s.min_region_points
-    best: dict[int, tuple[int, int]] = {}
-    for (r1, r2), c in zip(pair_keys.tolist(), pair_count.tolist(), strict=True):
-        for x, y in ((r1, r2), (r2, r1)):
-            if small[x] and not small[y] and c > best.get(x, (-1, 0))[1]:
-                best[x] = (y, c)
-    for x, (y, _) in best.items():
-        parent[find(x)] = find(y)
-    # Adjacent regions merge unless their shared boundary is concave.
-    cos_c = np.cos(np.radians(s.concave_angle_deg))
-    mid = 0.5 * (pts[a[cross]] + pts[b[cross]])
-    mid_keys = np.sort(np.stack([ra[cross], rb[cross]], 1), axis=1)
-    for (r1, r2), c in zip(pair_keys.tolist(), pair_count.tolist(), strict=True):
-        if small[r1] or small[r2] or c < 3:
-            continue
-        m = mid[(mid_keys[:, 0] == r1) & (mid_keys[:, 1] == r2)]
-        mtree = cKDTree(m)
-        patch = []
-        for r in (r1, r2):
-            idx = np.flatnonzero((region == r) & core)
-            if len(idx) == 0:
-                idx = np.flatnonzero(region == r)
-            d, _ = mtree.query(pts[idx], distance_upper_bound=s.patch_radius)
-            near = idx[np.isfinite(d)]
-            if len(near) == 0:
-                near = idx
-            nv = nrm[near].sum(axis=0)
-            patch.append((pts[near].mean(axis=0), nv / max(float(np.linalg.norm(nv)), 1e-12)))
-        (c1, n1), (c2, n2) = patch
-        d12 = c1 - c2
-        dist = float(np.linalg.norm(d12))
-        concave = dist > 0 and float((n1 - n2) @ d12) / dist < 0 and float(n1 @ n2) < cos_c
-        if not concave:
-            parent[find(r1)] = find(r2)
-    roots = np.array([find(x) for x in range(len(parent))])
-    return np.unique(roots[region], return_inverse=True)[1].reshape(-1).astype(np.int64)
 
 
 def merge_nearby(clusters: list[np.ndarray], gap: float, max_width: float) -> list[np.ndarray]:

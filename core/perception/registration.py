@@ -1,4 +1,4 @@
-"""ICP refinement and hypothesis verification, shared by the depth detectors.
+"""ICP refinement and hypothesis verification, shared by the depth detectors (``cvfh_icp``, ``fpfh_ransac``).
 
 A hypothesis is a ``T_world_part`` (4x4, metres). Refinement runs Open3D's
 point-to-plane ICP from the observed cluster (world frame) to a dense sample
@@ -36,14 +36,13 @@ most wrong poses, but not the ones a *near twin* of the part explains as well
 as the right one (a D-peg or keyed peg turned about its axis with the flat or
 key out of sight, a 52 x 53 mm block turned by 90 deg): their scores fall
 within 0.01 of the right pose's, inside the spread of right poses. No fixed
-threshold separates those; the detector compares the pose with its near twins
-instead (:func:`~asmteach.plugins.detectors.cvfh.resting.near_twins`).
+threshold separates those; the ``cvfh_icp`` detector compares the pose with its
+near twins instead (its ``resting.near_twins``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,7 +52,7 @@ from pydantic import Field
 import asmteach.core  # noqa: F401  (loads libusb before open3d)
 from asmteach.core import geometry
 from asmteach.core.models import StrictModel, TablePlane
-from asmteach.plugins.detectors.cvfh.segment import to_o3d
+from asmteach.core.perception.open3d_tools import one_thread, to_o3d
 
 import open3d as o3d  # isort: skip
 
@@ -64,7 +63,6 @@ __all__ = [
     "Verdict",
     "icp_refine",
     "model_cloud",
-    "one_thread",
     "ray_depths",
     "ray_plane",
     "surface_check",
@@ -203,28 +201,6 @@ def icp_refine(
             )
             T = np.asarray(res.transformation)
     return geometry.invert(T)
-
-
-@contextmanager
-def one_thread() -> Iterator[None]:
-    """Open3D on one thread inside the block (the previous limit is restored after).
-
-    Open3D (0.20, oneAPI TBB) sums ICP's normal equations over threads in the order the scheduler
-    runs them, so the same input gave poses a few ULPs apart from one run to the next; through
-    the corrector, the regrasp graph and T-RRT those ULPs grew into another plan. On one thread the
-    sum has one order. The demo's clusters are a few thousand points: the cost is not measurable.
-    Older Open3D (OpenMP) has no such call: there ``OMP_NUM_THREADS=1`` does it.
-    """
-    limit = getattr(o3d.utility, "set_max_threads", None)
-    if limit is None or o3d.utility.get_max_threads() == 1:
-        yield  # already one thread (an enclosing block): changing the limit twice per ICP costs a TBB re-sync
-        return
-    before = o3d.utility.get_max_threads()
-    limit(1)
-    try:
-        yield
-    finally:
-        limit(before)
 
 
 def verify(

@@ -10,18 +10,11 @@ import numpy as np
 import pytest
 
 from asmteach.core.clouds import read_cloud, to_world
-from asmteach.plugins.detectors.cvfh.segment import (
-    SegmentSettings,
-    _fit_table,
-    cluster_objects,
-    image_index,
-    label_scene,
-    mixed_pixels,
-    split_concave,
-    to_o3d,
-    voxelize,
-)
-from asmteach.plugins.detectors.cvfh.segment_score import IGNORE, TABLE, SceneScore, mosd_truth, score_segmentation
+from asmteach.core.perception.concave import split_concave
+from asmteach.core.perception.open3d_tools import to_o3d
+from asmteach.core.perception.scene_labels import image_index, label_scene, mixed_pixels
+from asmteach.core.perception.segment_score import IGNORE, TABLE, SceneScore, mosd_truth, score_segmentation
+from asmteach.core.perception.segmentation import SegmentSettings, _fit_table, cluster_objects, voxelize
 
 # --------------------------------------------------------------------------------------------- scoring
 
