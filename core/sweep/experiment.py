@@ -21,7 +21,7 @@ from asmteach.core.config import MAX_SEED, check_finite, format_validation_error
 from asmteach.core.errors import UserError
 from asmteach.core.io import read_yaml
 from asmteach.core.models import StrictModel, resolve_relative
-from asmteach.core.registry import closest
+from asmteach.core.registry import entry_points, load_named
 
 GROUP = "asmteach.experiments"
 
@@ -107,20 +107,12 @@ class TrialSpec(StrictModel):
 
 def experiment_kinds() -> dict[str, metadata.EntryPoint]:
     """Registered experiment kinds by name."""
-    return {ep.name: ep for ep in metadata.entry_points(group=GROUP)}
+    return {ep.name: ep for ep in entry_points(GROUP)}
 
 
 def load_kind(name: str) -> type[Experiment]:
     """The experiment class registered as ``name``; :class:`UserError` if unknown."""
-    kinds = experiment_kinds()
-    if name not in kinds:
-        hint = closest(name, list(kinds))
-        more = f"; did you mean {hint!r}?" if hint else f" (known: {', '.join(sorted(kinds)) or 'none'})"
-        raise UserError(f"experiment: no experiment kind named {name!r}{more}")
-    cls = kinds[name].load()
-    if not (isinstance(cls, type) and issubclass(cls, Experiment)):
-        raise UserError(f"experiment kind {name!r} ({kinds[name].value}) is not an Experiment subclass")
-    return cls
+    return load_named(GROUP, name, Experiment, "experiment kind")
 
 
 def load_experiment(path: str | Path) -> tuple[ExperimentFile, type[Experiment]]:
