@@ -23,6 +23,43 @@ __all__ = ["build_parser", "main"]
 log = logging.getLogger("asmteach")
 
 
+def _print_settings(title: str, model: type, prefix: str = "") -> None:
+    """One block of ``plugins --settings``: a title line, then ``key  type  default  description`` rows."""
+    from asmteach.core.config import describe_settings
+
+    rows = describe_settings(model, prefix)
+    print(f"{title}:" if rows else f"{title}: no settings")
+    widths = [max(len(r[i]) for r in rows) for i in range(3)] if rows else []
+    for key, kind, default, text in rows:
+        print(f"  {key:<{widths[0]}}  {kind:<{widths[1]}}  {default:<{widths[2]}}  {text}".rstrip())
+    print()
+
+
+def _cmd_plugin_settings(args: argparse.Namespace) -> int:
+    """``plugins --settings``: the run config's own sections, then every plugin's ``Settings`` (and ``demo``)."""
+    from asmteach.core import registry
+    from asmteach.core.config import ROLE_OF_KEY, RunConfig
+
+    key_of_role = {role: key for key, role in ROLE_OF_KEY.items()}
+    if args.role is None:
+        _print_settings("run config (key, type, default, description)", RunConfig)
+    broken = 0
+    for info in registry.discover(args.role):
+        where = f"{key_of_role.get(info.role, info.role)}.settings"
+        title = f"{registry.group_name(info.role)} {info.name} ({where})"
+        if info.cls is None:
+            broken += 1
+            print(f"{title}: import error: {info.error}\n")
+            continue
+        _print_settings(title, info.cls.Settings, prefix=f"{where}.")
+        demo = getattr(info.cls, "DemoSettings", None)
+        if demo is not None:
+            _print_settings(f"{registry.group_name(info.role)} {info.name} (demo)", demo, prefix="demo.")
+    if broken:
+        print(f"{broken} plugin(s) failed to import; the others are usable.", file=sys.stderr)
+    return 0
+
+
 def _cmd_plugins(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
@@ -30,6 +67,8 @@ def _cmd_plugins(args: argparse.Namespace) -> int:
     from asmteach.core import registry
     from asmteach.core.hooks import hook_errors, make_plugin_manager
 
+    if args.settings:
+        return _cmd_plugin_settings(args)
     infos = registry.discover(args.role)
     table = Table(title="asmteach plugins", show_lines=False)
     for col in ("group", "name", "distribution", "version", "status"):
@@ -95,8 +134,9 @@ def _overrides(items: Sequence[str] | None) -> dict[str, object] | None:
             overrides[key.strip()] = yaml.safe_load(value)
         except yaml.YAMLError as exc:
             problem = getattr(exc, "problem", None) or "not a YAML value"
-            raise UserError(f"--set {key.strip()}: the value is not valid YAML ({problem}); quote a text, "
-                            "e.g. --set name='a: b'") from None
+            raise UserError(
+                f"--set {key.strip()}: the value is not valid YAML ({problem}); quote a text, e.g. --set name='a: b'"
+            ) from None
     return overrides or None
 
 
@@ -113,8 +153,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
         with run_folder(out, cfg.name, force=args.force) as stage:
             report = run_pipeline(cfg, stage, pm=args.plugin_manager)
     except KeyboardInterrupt:
-        print(f"asmteach: interrupted; {out} is as it was before this run (its partial results were dropped)",
-              file=sys.stderr)
+        print(
+            f"asmteach: interrupted; {out} is as it was before this run (its partial results were dropped)",
+            file=sys.stderr,
+        )
         return 130
     try:
         from asmteach.core.report_html import format_summary
@@ -125,8 +167,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     print(f"report: {out / 'report.html'}")
     if not report.success:
         why = " ".join(str(report.reason or "the parts did not end assembled").split())
-        print(f"asmteach: {cfg.name} failed at {report.failed_stage}: {why[:300]} (report: {out / 'report.html'})",
-              file=sys.stderr)
+        print(
+            f"asmteach: {cfg.name} failed at {report.failed_stage}: {why[:300]} (report: {out / 'report.html'})",
+            file=sys.stderr,
+        )
     return 0 if report.success else 1
 
 
@@ -146,10 +190,18 @@ def build_parser(pm=None) -> argparse.ArgumentParser:
 
     p = sub.add_parser("plugins", help="list discovered plugins per group, with import errors")
     p.add_argument("--role", default=None, help="only this role (e.g. detectors)")
+    p.add_argument(
+        "--settings",
+        action="store_true",
+        help="list every setting (key, type, default, description) of the run config and of each plugin",
+    )
     p.set_defaults(func=_cmd_plugins)
 
-    p = sub.add_parser("validate", help="check a run config (builds everything `run` builds, before any work) or "
-                       "an experiment file (every grid point)")
+    p = sub.add_parser(
+        "validate",
+        help="check a run config (builds everything `run` builds, before any work) or "
+        "an experiment file (every grid point)",
+    )
     p.add_argument("config")
     p.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a config key (dotted path)")
     p.set_defaults(func=_cmd_validate)
@@ -185,7 +237,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     verbose = "-v" in (argv if argv is not None else sys.argv[1:]) or "--verbose" in (
-        argv if argv is not None else sys.argv[1:])
+        argv if argv is not None else sys.argv[1:]
+    )
     try:
         pm = make_plugin_manager()
         parser = build_parser(pm)
@@ -215,8 +268,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             traceback.print_exc()
         text = " ".join(str(exc).split())
         text = text if len(text) <= 200 else text[:200] + "..."
-        print(f"asmteach: internal error ({type(exc).__name__}: {text}); this is a bug, please report it with "
-              "the output of the same command with -v", file=sys.stderr)
+        print(
+            f"asmteach: internal error ({type(exc).__name__}: {text}); this is a bug, please report it with "
+            "the output of the same command with -v",
+            file=sys.stderr,
+        )
         return 1
 
 

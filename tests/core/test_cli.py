@@ -43,3 +43,46 @@ def test_written_files_are_readable_like_ordinary_files(tmp_path):
     umask = os.umask(0)
     os.umask(umask)
     assert path.stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+KNOWN_SETTINGS = {
+    "aruco": ["teacher.settings.min_frames", "demo.frames"],
+    "cvfh_icp": ["detector.settings.refine.icp_iterations"],
+    "fpfh_ransac": ["detector.settings.viewpoint"],
+    "stable_placements": ["corrector.settings.min_margin"],
+    "antipodal": ["grasp_planner.settings.mu"],
+    "trrt": ["motion_planner.settings.collision_resolution"],
+    "rrtconnect": ["motion_planner.settings.collision_resolution"],
+    "nextage_pybullet": ["robot.settings.table_center"],
+    "urdf_arm": ["robot.settings.table_center"],
+    "regrasp": ["assembly_planner.settings.retract"],
+}
+"""A setting every built-in plugin is known to have, as ``plugins --settings`` names it."""
+
+
+def test_plugins_settings_lists_a_known_setting_of_every_builtin_plugin(capsys):
+    from asmteach.core import registry
+
+    builtin = {i.name for i in registry.discover(load=False) if i.distribution == "asmteach"}
+    assert builtin == set(KNOWN_SETTINGS)  # a new built-in plugin gets a line here
+    assert main(["plugins", "--settings"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    rows = {line.split()[0]: line.split() for line in lines if line.startswith("  ")}
+    for plugin, keys in KNOWN_SETTINGS.items():
+        assert any(line.startswith("asmteach.") and f" {plugin} (" in line for line in lines), plugin
+        for key in keys:
+            assert key in rows, (plugin, key)
+            assert len(rows[key]) >= 3  # key, type, default (and the description when the plugin gives one)
+    # the run config's own sections, with units in their descriptions
+    assert "execution.scene.x_range" in rows and "metres" in " ".join(rows["table.height"])
+    assert rows["execution.animation_fps"][1:3] == ["float", "4.0"]
+
+
+def test_plugins_settings_of_one_role_and_a_broken_plugin(toy_dist, capsys):
+    assert main(["plugins", "--settings", "--role", "detectors"]) == 0
+    captured = capsys.readouterr()
+    assert ["detector.settings.voxel_size", "float", "0.002", "metres"] in [
+        line.split() for line in captured.out.splitlines()
+    ]
+    assert "broken_detector" in captured.out and "import error" in captured.out
+    assert "run config" not in captured.out and "teacher.settings" not in captured.out

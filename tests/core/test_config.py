@@ -1,11 +1,22 @@
 """Config validation: each error is one line with the key path and the reason."""
 
 import textwrap
+from pathlib import Path
 
 import pytest
+import yaml
+from pydantic import BaseModel
 
 from asmteach.core.cli import main
-from asmteach.core.config import load_run_config
+from asmteach.core.config import (
+    ROLE_OF_KEY,
+    PluginChoice,
+    RunConfig,
+    describe_settings,
+    load_run_config,
+    nested_model,
+    set_dotted,
+)
 from asmteach.core.errors import UserError
 
 
@@ -66,3 +77,70 @@ def test_top_level_must_be_mapping(tmp_path):
 def test_overrides_apply_dotted_keys(toy_config):
     cfg = load_run_config(toy_config, overrides={"detector.settings.voxel_size": 0.008, "seed": 11})
     assert cfg.detector.settings["voxel_size"] == 0.008 and cfg.seed == 11
+
+
+# ---------------------------------------------------------------- a misspelt key in every section
+REPO = Path(__file__).resolve().parents[2]
+DEMO = REPO / "configs/demo.yaml"
+SECTIONS = [
+    "", "table", "execution", "execution.scene", "demo",
+    "teacher", "teacher.settings", "detector", "detector.settings", "detector.settings.refine",
+    "corrector", "corrector.settings", "grasp_planner", "grasp_planner.settings", "motion_planner",
+    "motion_planner.settings", "robot", "robot.settings", "robot.settings.ik", "assembly_planner",
+    "assembly_planner.settings",
+]  # fmt: skip
+"""Every section of configs/demo.yaml's run (plugin settings and their nested sections included)."""
+
+
+def _section_model(raw: dict, path: str) -> type[BaseModel]:
+    """The model that validates the section at ``path`` of the run config ``raw``."""
+    from asmteach.core import registry
+
+    model: type[BaseModel] = RunConfig
+    keys = path.split(".") if path else []
+    for i, key in enumerate(keys):
+        if key == "settings":
+            model = registry.get_class(ROLE_OF_KEY[keys[i - 1]], raw[keys[i - 1]]["plugin"]).Settings
+        elif key == "demo":
+            model = registry.get_class("teachers", raw["teacher"]["plugin"]).DemoSettings
+        elif keys[i + 1 : i + 2] != ["settings"]:
+            field = model.model_fields[key]
+            model = nested_model(field.annotation)
+        else:
+            model = PluginChoice
+    return model
+
+
+def _misspelt(model: type[BaseModel]) -> str:
+    """One of ``model``'s keys with its last two letters swapped (``height`` -> ``heigth``)."""
+    name = next(n for n in model.model_fields if len(n) > 2 and n[-1] != n[-2])
+    return name[:-2] + name[-1] + name[-2]
+
+
+def test_every_section_of_the_run_config_is_in_the_list() -> None:
+    """A new section of RunConfig gets a misspelt-key case: each model-typed key is listed."""
+    nested = {key for key, kind, _, _ in describe_settings(RunConfig) if nested_model(_annotation(key))}
+    assert nested <= set(SECTIONS), nested - set(SECTIONS)
+
+
+def _annotation(dotted: str) -> object:
+    model: type[BaseModel] | None = RunConfig
+    ann: object = None
+    for key in dotted.split("."):
+        ann = model.model_fields[key].annotation if model is not None else None
+        model = nested_model(ann)
+    return ann
+
+
+@pytest.mark.parametrize("section", SECTIONS, ids=[s or "top" for s in SECTIONS])
+def test_a_misspelt_key_in_any_section_exits_2_naming_its_path(section, tmp_path, capsys) -> None:
+    raw = yaml.safe_load(DEMO.read_text())
+    raw["structure"] = str(DEMO.parent / raw["structure"])
+    key = _misspelt(_section_model(raw, section))
+    dotted = f"{section}.{key}" if section else key
+    set_dotted(raw, dotted, 1)
+    bad = tmp_path / "typo.yaml"
+    bad.write_text(yaml.safe_dump(raw))
+    assert main(["validate", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert f"{dotted}: unknown key" in err and "Traceback" not in err and err.count("\n") == 1
