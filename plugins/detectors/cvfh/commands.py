@@ -37,7 +37,6 @@ Exit codes: 0 found, 1 not found (the JSON says why), 2 bad input (one line).
 from __future__ import annotations
 
 import argparse
-import inspect
 import logging
 import time
 from dataclasses import dataclass, field
@@ -49,6 +48,7 @@ import numpy as np
 import asmteach.core  # noqa: F401  (loads libusb before open3d)
 from asmteach.core import clouds, geometry, registry
 from asmteach.core.config import load_run_config
+from asmteach.core.detect_correct import detect_and_correct
 from asmteach.core.errors import UserError
 from asmteach.core.hooks import hookimpl
 from asmteach.core.interfaces import Corrector, Detector, PartModel
@@ -57,7 +57,7 @@ from asmteach.core.models import Detection, TablePlane
 from asmteach.core.parts import load_parts
 from asmteach.core.perception.viewpoint import NO_VIEWPOINT
 
-__all__ = ["SceneCloud", "asmteach_add_commands", "detection_report", "load_cloud", "place_cloud", "run_detection"]
+__all__ = ["SceneCloud", "asmteach_add_commands", "detection_report", "load_cloud", "place_cloud"]
 
 log = logging.getLogger(__name__)
 
@@ -167,7 +167,7 @@ def _cmd_detect(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     detector.prepare(part)  # the view-database build is not detection time
     prep_ms = 1000.0 * (time.perf_counter() - t0)
-    detection = run_detection(detector, corrector, scene.points, part, table, viewpoint=scene.viewpoint)
+    detection = detect_and_correct(detector, corrector, scene.points, part, table, viewpoint=scene.viewpoint)
     report = detection_report(detection)
     report["timing_ms_excluded"] = {"prepare": round(prep_ms, 1)}
     report["detector"] = det_choice[0]
@@ -286,71 +286,6 @@ def choose_viewpoint(
         return config_eye
     name = cloud.path.name if cloud.path is not None else "the cloud"
     raise UserError(f"{name}: {NO_VIEWPOINT}")
-
-
-def run_detection(
-    detector: Detector,
-    corrector: Corrector | None,
-    cloud: np.ndarray,
-    part: PartModel,
-    table: TablePlane | None = None,
-    *,
-    viewpoint: np.ndarray | None = None,
-) -> Detection:
-    """Detect, then correct the rough pose (when a corrector is given); timings include the correction.
-
-    ``viewpoint`` ((3,), world frame, metres) is the camera centre, or ``None``
-    for the detector's own setting (a detector without one raises :class:`UserError`).
-    The corrector gets the viewpoint the detector used (``details["viewpoint"]``) when its ``correct`` takes one.
-    """
-    det = detector.detect(cloud, part, table, viewpoint=viewpoint)
-    if not det.found or corrector is None or det.rough is None:
-        return det
-    t0, c0 = time.perf_counter(), time.process_time()
-    used_table = table or _table_of(det)
-    segment = part_segment(cloud, det.rough, part, used_table)
-    try:
-        used_eye = det.details.get("viewpoint", viewpoint)
-        if used_eye is not None and _takes_viewpoint(corrector):
-            corr = corrector.correct(det.rough, part, used_table, segment, viewpoint=np.asarray(used_eye, float))
-        else:
-            corr = corrector.correct(det.rough, part, used_table, segment)
-    except UserError as exc:
-        det.details["correction_error"] = str(exc)
-        det.timing_ms["detect"] = det.timing_ms.get("total", 0.0)
-        det.timing_ms["correct"] = round(1000.0 * (time.perf_counter() - t0), 2)
-        return det
-    ms = 1000.0 * (time.perf_counter() - t0)
-    det.corrected = corr.T_world_part
-    # "detect" is the detector alone; "total" adds the correction (both without start-up and the view database).
-    det.timing_ms["detect"] = det.timing_ms.get("total", 0.0)
-    det.timing_ms["correct"] = round(ms, 2)
-    det.timing_ms["total"] = round(det.timing_ms["detect"] + ms, 2)
-    det.timing_ms["cpu_correct"] = round(1000.0 * (time.process_time() - c0), 2)
-    det.details["placement_id"] = corr.placement_id
-    return det
-
-
-def _takes_viewpoint(corrector: Corrector) -> bool:
-    """Whether ``corrector.correct`` accepts a ``viewpoint`` keyword (the core interface does not require one)."""
-    return "viewpoint" in inspect.signature(corrector.correct).parameters
-
-
-def _table_of(det: Detection) -> TablePlane:
-    raw = det.details.get("table")
-    return TablePlane.model_validate(raw) if raw else TablePlane()
-
-
-def part_segment(cloud: np.ndarray, T_world_part: np.ndarray, part: PartModel, table: TablePlane) -> np.ndarray:
-    """Observed points (world) near the detected part and above the table, for correctors that refine."""
-    pts = np.asarray(cloud, dtype=float)
-    pts = pts[np.all(np.isfinite(pts), axis=1)]
-    center = geometry.transform_points(T_world_part, np.asarray(part.mesh.bounds).mean(axis=0)[None])[0]
-    radius = 0.5 * float(np.linalg.norm(np.ptp(np.asarray(part.mesh.vertices), axis=0)))
-    n = np.asarray(table.normal, dtype=float)
-    near = np.linalg.norm(pts - center, axis=1) < radius + 0.005
-    above = pts @ n - table.height > 0.003
-    return pts[near & above]
 
 
 def detection_report(det: Detection) -> dict[str, Any]:

@@ -34,6 +34,7 @@ from pydantic import Field
 
 from asmteach.core import geometry, registry
 from asmteach.core.config import TableSettings
+from asmteach.core.detect_correct import detect_and_correct
 from asmteach.core.interfaces import Corrector, Detector, PartModel
 from asmteach.core.io import write_text
 from asmteach.core.models import Placement, StrictModel, TablePlane
@@ -41,7 +42,6 @@ from asmteach.core.parts import build_part, load_structure
 from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
 from asmteach.core.sweep import Experiment, to_csv, to_markdown
 from asmteach.core.symmetry import part_symmetries
-from asmteach.plugins.detectors.cvfh.commands import run_detection
 from asmteach.plugins.detectors.cvfh.scenes import QUARTERS, default_camera_pose, place_on_table, render_table_scene
 
 __all__ = ["DetectionPrecision", "part_symmetries", "pose_errors"]
@@ -181,7 +181,7 @@ class DetectionPrecision(Experiment):
         assert corrector is None or isinstance(corrector, Corrector)
         table = TablePlane(height=params.table.height) if params.give_table else None
         # The experiment knows its camera: its centre is the viewpoint of the detector and the corrector.
-        det = run_detection(detector, corrector, scene.cloud, part, table, viewpoint=T_world_cam[:3, 3])
+        det = detect_and_correct(detector, corrector, scene.cloud, part, table, viewpoint=T_world_cam[:3, 3])
 
         row: dict[str, Any] = {
             "kind": kind,

@@ -12,13 +12,13 @@ import pytest
 
 from asmteach.core import geometry
 from asmteach.core.cli import main
+from asmteach.core.detect_correct import detect_and_correct
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Placement
 from asmteach.core.parts import build_part, load_structure
 from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings, look_at
 from asmteach.core.perception.viewpoint import NO_VIEWPOINT
-from asmteach.plugins.detectors.cvfh.commands import run_detection
 from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
 from asmteach.plugins.detectors.cvfh.scenes import TableScene, place_on_table, render_table_scene
 from asmteach.plugins.planners.placements.corrector import StablePlacementCorrector
@@ -74,7 +74,7 @@ def test_finds_and_corrects_with_the_robot_camera(
 ) -> None:
     scene = _robot_scene(l_block, placements[placement].T_table_part, np.radians(yaw_deg), xy, seed=20 + placement)
     corrector = StablePlacementCorrector({}, seed=0)
-    det = run_detection(detector, corrector, scene.cloud, l_block, viewpoint=ROBOT_EYE)
+    det = detect_and_correct(detector, corrector, scene.cloud, l_block, viewpoint=ROBOT_EYE)
     assert det.found, det.reason
     assert np.allclose(det.details["viewpoint"], ROBOT_EYE)
     assert geometry.translation_distance(det.rough, scene.T_world_part) < 0.003

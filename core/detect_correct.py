@@ -1,0 +1,93 @@
+"""Detect a part in a cloud, then correct the rough pose: the one path every caller takes.
+
+The pipeline (first look and looking again at the goal), ``asmteach detect`` and
+the detection experiments all run :func:`detect_and_correct`, so a pose is
+corrected the same way wherever it is reported. Frames: the cloud, the table and
+every pose are in the world frame, metres.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from asmteach.core import geometry
+from asmteach.core.errors import UserError
+from asmteach.core.interfaces import Corrector, Detector, PartModel
+from asmteach.core.models import Detection, TablePlane
+
+__all__ = ["SEGMENT_RADIUS", "detect_and_correct", "part_segment"]
+
+SEGMENT_RADIUS = 0.01
+"""Metres: cloud points this close to the part's surface at the rough pose are its observed segment."""
+
+
+def part_segment(
+    cloud: np.ndarray, part: PartModel, T_world_part: np.ndarray, radius: float = SEGMENT_RADIUS
+) -> np.ndarray:
+    """Cloud points ``(n, 3)`` within ``radius`` metres of the part's surface at ``T_world_part``.
+
+    The surface samples are seeded: unseeded, the segment (so the corrected pose and
+    the whole plan after it) changed from run to run.
+    """
+    pts = np.asarray(cloud, dtype=float)
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    surface = geometry.transform_points(T_world_part, np.asarray(part.mesh.sample(3000, return_index=False, seed=0)))
+    d, _ = cKDTree(surface).query(pts, distance_upper_bound=radius)
+    return pts[np.isfinite(d)]
+
+
+def _table_of(det: Detection) -> TablePlane:
+    """The table the detector found (or assumed), else the default one."""
+    raw = det.details.get("table")
+    return TablePlane.model_validate(raw) if raw else TablePlane()
+
+
+def detect_and_correct(
+    detector: Detector,
+    corrector: Corrector | None,
+    cloud: np.ndarray,
+    part: PartModel,
+    table: TablePlane | None = None,
+    *,
+    viewpoint: np.ndarray | None = None,
+) -> Detection:
+    """Detect ``part`` in ``cloud`` ``(n, 3)``, then correct the rough pose when a corrector is given.
+
+    ``viewpoint`` ((3,), world frame, metres) is the camera centre, or ``None`` for
+    the detector's own setting; the corrector gets the viewpoint the detector used
+    (``details["viewpoint"]``). ``table=None`` lets the detector find the table and
+    the corrector use that one. A correction that fails with a :class:`UserError`
+    leaves the rough pose and says why in ``details["correction_error"]``.
+
+    Timings (ms): ``detect`` is the detector alone, ``correct`` the correction,
+    ``total`` both, ``cpu_correct`` the correction's process time.
+    """
+    det = detector.detect(cloud, part, table, viewpoint=viewpoint)
+    if not det.found or corrector is None or det.rough is None:
+        return det
+    t0, c0 = time.perf_counter(), time.process_time()
+    used_table = table or _table_of(det)
+    used_eye = det.details.get("viewpoint", viewpoint)
+    det.timing_ms["detect"] = det.timing_ms.get("total", 0.0)
+    try:
+        corr = corrector.correct(
+            det.rough,
+            part,
+            used_table,
+            part_segment(cloud, part, det.rough),
+            viewpoint=None if used_eye is None else np.asarray(used_eye, dtype=float),
+        )
+    except UserError as exc:
+        det.details["correction_error"] = str(exc)
+        det.timing_ms["correct"] = round(1000.0 * (time.perf_counter() - t0), 2)
+        return det
+    ms = 1000.0 * (time.perf_counter() - t0)
+    det.corrected = corr.T_world_part
+    det.timing_ms["correct"] = round(ms, 2)
+    det.timing_ms["total"] = round(det.timing_ms["detect"] + ms, 2)
+    det.timing_ms["cpu_correct"] = round(1000.0 * (time.process_time() - c0), 2)
+    det.details["placement_id"] = corr.placement_id
+    return det
