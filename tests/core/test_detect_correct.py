@@ -1,0 +1,89 @@
+"""The one detect-then-correct path, with a detector and a corrector made here."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from asmteach.core import geometry
+from asmteach.core.detect_correct import detect_and_correct, part_segment
+from asmteach.core.errors import UserError
+from asmteach.core.interfaces import Corrector, Detector, PartModel
+from asmteach.core.models import Correction, Detection, TablePlane
+from asmteach.core.parts import build_part, load_structure
+
+STRUCTURE = Path(__file__).resolve().parents[2] / "configs/parts/set1/peg_in_hole.yaml"
+EYE = np.array([0.5, 0.0, 1.0])
+
+
+class _Found(Detector):
+    """Finds the part at a fixed pose and says which viewpoint it used."""
+
+    def __init__(self, T: np.ndarray) -> None:
+        super().__init__()
+        self.T = T
+
+    def detect(
+        self, cloud: np.ndarray, part: PartModel, table: TablePlane | None = None, viewpoint: np.ndarray | None = None
+    ) -> Detection:
+        return Detection(
+            part=part.name, found=True, rough=self.T, timing_ms={"total": 5.0}, details={"viewpoint": EYE.tolist()}
+        )
+
+
+class _Snap(Corrector):
+    """Records what it was given; lifts the pose 1 mm, or refuses."""
+
+    def __init__(self, refuse: bool = False) -> None:
+        super().__init__()
+        self.refuse, self.seen = refuse, {}
+
+    def correct(
+        self,
+        T_world_part: np.ndarray,
+        part: PartModel,
+        table: TablePlane,
+        cloud: np.ndarray | None = None,
+        viewpoint: np.ndarray | None = None,
+    ) -> Correction:
+        self.seen: dict[str, Any] = {"cloud": cloud, "viewpoint": viewpoint, "table": table}
+        if self.refuse:
+            raise UserError("no placement near the rough pose")
+        return Correction(T_world_part=geometry.from_rotation(np.eye(3), (0, 0, 0.001)) @ T_world_part, placement_id=3)
+
+
+@pytest.fixture(scope="module")
+def part() -> PartModel:
+    return build_part(load_structure(STRUCTURE).part_b)
+
+
+def _cloud(part: PartModel, T: np.ndarray) -> np.ndarray:
+    on_part = geometry.transform_points(T, np.asarray(part.mesh.sample(400, seed=1)))
+    far = np.array([[2.0, 2.0, 0.0], [np.nan, 0.0, 0.0]])
+    return np.vstack([on_part, far])
+
+
+def test_segment_keeps_the_points_on_the_part_only(part: PartModel) -> None:
+    T = geometry.from_rpy(0.0, 0.0, 0.3, (0.4, 0.1, 0.05))
+    seg = part_segment(_cloud(part, T), part, T)
+    assert len(seg) == 400 and np.all(np.isfinite(seg))
+
+
+def test_corrects_with_the_detectors_viewpoint_and_the_segment(part: PartModel) -> None:
+    T = geometry.from_rpy(0.0, 0.0, 0.3, (0.4, 0.1, 0.05))
+    corrector = _Snap()
+    det = detect_and_correct(_Found(T), corrector, _cloud(part, T), part, TablePlane(), viewpoint=None)
+    assert det.corrected is not None and det.corrected[2, 3] == pytest.approx(T[2, 3] + 0.001)
+    assert det.details["placement_id"] == 3
+    assert np.allclose(corrector.seen["viewpoint"], EYE) and len(corrector.seen["cloud"]) == 400
+    assert det.timing_ms["detect"] == 5.0 and det.timing_ms["total"] >= 5.0
+
+
+def test_a_refused_correction_keeps_the_rough_pose_and_says_why(part: PartModel) -> None:
+    T = np.eye(4)
+    det = detect_and_correct(_Found(T), _Snap(refuse=True), _cloud(part, T), part)
+    assert det.found and det.corrected is None
+    assert "no placement" in det.details["correction_error"]
