@@ -1,16 +1,5 @@
-"""Symmetries of a rigid part: the proper rotations that map its surface onto itself.
-
-The one symmetry module of asmteach; every stage uses it:
-
-* :func:`part_symmetries`: the part's symmetry group (part frame, about the
-  centre of mass). A pose of a symmetric part is only defined up to these
-  rotations: a detector may return any of them, and an assembly is right
-  when it matches the taught one up to them.
-* :class:`SymmetryFinder`: the order of the cyclic symmetry about one axis
-  (a placement looks the same after a turn by ``2 pi / m`` about the table
-  normal); :func:`symmetry_yaws` lists those turns.
-* :func:`principal_frame`: the principal axes of inertia as a right-handed
-  rotation (a new array: trimesh's own arrays are read-only).
+"""The order of a mesh's rotational symmetry about an axis (:class:`SymmetryFinder`), and whether one
+rotation maps it onto itself.
 
 How a rotation is tested (``SymmetryFinder.maps``), from cheap necessary
 conditions to the full one, so most candidates cost a few KD-tree queries:
@@ -30,15 +19,6 @@ conditions to the full one, so most candidates cost a few KD-tree queries:
    planes pass within ``tol`` (double precision; Open3D's float32 scene
    distance put the centroids of long slivers 2 ``tol`` off their own faces).
 
-Candidates for the whole group: the 24 rotations of the cube group in the
-part frame and in the principal frame (boxes, cubes), the cyclic group about
-each principal and part-frame axis (prisms, pegs, wheels: up to
-``max_order``), and the half-turns about axes perpendicular to a symmetry
-axis (the dihedral flips of a hexagonal peg). A surface of revolution (a
-tube within ``tol`` of a cylinder) is symmetric under every turn about its
-axis; it gets the finite group ``D_max_order`` (10 deg steps by default), so
-an error figure may keep up to half a step of a turn that changes nothing.
-
 Units: metres, radians; frames: the part frame.
 """
 
@@ -49,28 +29,14 @@ from typing import Any
 import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
-from scipy.spatial.transform import Rotation
 
 from asmteach.core import geometry
-
-__all__ = [
-    "SymmetryFinder",
-    "axis_rotations",
-    "equivalent_transforms",
-    "nearest_equivalent_error",
-    "part_symmetries",
-    "principal_frame",
-    "symmetry_yaws",
-]
 
 # A vertex is a sharp corner when the smallest eigenvalue of the mean n n^T of its faces'
 # unit normals exceeds this (0 on a plane or a crease; 1/3 at a box corner).
 _CORNER_EIG = 0.02
 # Meshes with at most this many vertices skip the hull-vertex prefilter of the candidate orders.
 _SMALL = 64
-# Two symmetries closer than this (radians) are one; the flips found from a histogram are up to
-# a degree or two off the exact ones and still map within a 0.5 mm tol; D_36 flips are 5 deg apart.
-_SAME_RAD = np.radians(2.5)
 # Point-plane distances computed per chunk of points (bounds the memory of the on-surface test).
 _PAIRS = 2_000_000
 
@@ -281,8 +247,9 @@ class SymmetryFinder:
             import open3d as o3d
 
             self._scene = o3d.t.geometry.RaycastingScene()
-            self._scene.add_triangles(o3d.core.Tensor(self.vertices.astype(np.float32)),
-                                      o3d.core.Tensor(self.faces.astype(np.uint32)))
+            self._scene.add_triangles(
+                o3d.core.Tensor(self.vertices.astype(np.float32)), o3d.core.Tensor(self.faces.astype(np.uint32))
+            )
         import open3d as o3d
 
         d = self._scene.compute_distance(o3d.core.Tensor(np.asarray(points, dtype=np.float32))).numpy()
@@ -311,116 +278,3 @@ class SymmetryFinder:
 def symmetry_yaws(order: int) -> list[float]:
     """The equivalent yaws ``2 pi j / m`` (radians) of an ``m``-fold symmetry, ``j = 0..m-1``."""
     return [2.0 * np.pi * j / order for j in range(order)]
-
-
-def principal_frame(mesh: trimesh.Trimesh) -> np.ndarray:
-    """``(3, 3)`` right-handed rotation whose columns are the mesh's principal axes of inertia.
-
-    A new array: trimesh returns its cached principal axes read-only, and
-    flipping one in place raised ``ValueError`` for every part whose axes
-    came out left-handed.
-    """
-    F = np.array(mesh.principal_inertia_vectors, dtype=float).T  # np.array copies
-    if np.linalg.det(F) < 0.0:
-        F = F * np.array([1.0, 1.0, -1.0])
-    return F
-
-
-def _unique(rotations: list[np.ndarray], atol: float = 1e-6) -> list[np.ndarray]:
-    out: list[np.ndarray] = []
-    for R in rotations:
-        if not any(np.allclose(R, S, atol=atol) for S in out):
-            out.append(R)
-    return out
-
-
-def _perpendicular_flips(finder: SymmetryFinder, samples: np.ndarray, axis: np.ndarray, order: int,
-                         bins: int = 720) -> list[np.ndarray]:
-    """Half-turns about axes perpendicular to ``axis`` (through the centre) that map the part onto itself.
-
-    A dihedral group ``D_m`` has ``m`` such flips, ``pi / m`` apart, so one
-    flip found gives them all. A flip about the line at angle ``phi`` takes
-    a surface point at (angle ``t``, radius ``r``, height ``h``) about
-    ``axis`` to (``2 phi - t``, ``r``, ``-h``); the histogram ``H(t, r, h)`` of
-    centred surface ``samples`` then matches its own image, so the circular
-    convolution over ``t`` of ``H(., r, h)`` with ``H(., r, -h)`` (one FFT)
-    peaks at ``2 phi``. The highest peaks are the candidates, checked
-    exactly. Tessellation-free: a 64-sided rim gives no preferred vertex.
-    """
-    axis = axis / np.linalg.norm(axis)
-    u = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
-    u /= np.linalg.norm(u)
-    v = np.cross(axis, u)
-    h = samples @ axis
-    r = np.hypot(samples @ u, samples @ v)
-    t = np.mod(np.arctan2(samples @ v, samples @ u), 2.0 * np.pi)
-    hmax, rmax = float(np.abs(h).max()) + 1e-12, float(r.max()) + 1e-12
-    H, _ = np.histogramdd(np.c_[t, r, h], bins=(bins, 8, 8),
-                          range=((0.0, 2.0 * np.pi), (0.0, rmax), (-hmax, hmax)))
-    F = np.fft.rfft(H, axis=0)
-    conv = np.fft.irfft((F * F[:, :, ::-1]).sum(axis=(1, 2)), n=bins, axis=0)  # H(., r, h) * H(., r, -h)
-    step = 2.0 * np.pi / bins
-    rots = axis_rotations(axis, 2.0 * np.pi * np.arange(order) / order)
-    for peak in np.argsort(conv)[::-1][:4]:
-        phi = 0.5 * (peak + 0.5) * step  # the bin centre of 2 phi; refined by testing its neighbours too
-        for dphi in (0.0, -0.5 * step, 0.5 * step):
-            d = np.cos(phi + dphi) * u + np.sin(phi + dphi) * v
-            flip = Rotation.from_rotvec(np.pi * d).as_matrix()
-            if finder.maps(flip):
-                return [R @ flip for R in rots]
-    return []
-
-
-def part_symmetries(mesh: trimesh.Trimesh, com: np.ndarray, tol: float = 0.0005,
-                    max_order: int = 36) -> list[np.ndarray]:
-    """Proper rotations (``(4, 4)``, part frame, about the centre of mass ``com``) that map the part onto itself.
-
-    ``tol`` (metres) is how far a rotated surface may stray from the surface
-    and still be the same part (0.5 mm: a pose that differs by such a turn
-    puts the same solid in the same place, for grasping and assembling it).
-    The identity comes first; see the module docstring for the candidates.
-    """
-    com = np.asarray(com, dtype=float)
-    finder = SymmetryFinder(mesh, np.asarray(mesh.convex_hull.vertices), com, tol=tol, max_order=max_order,
-                            corners=False)
-    frames = [np.eye(3), principal_frame(mesh)]
-    cube = Rotation.create_group("O").as_matrix()
-    candidates = [F @ C @ F.T for F in frames for C in cube]
-    samples = trimesh.sample.sample_surface(mesh, 4000, seed=0)[0] - com
-    for axis in (F[:, k] for F in frames for k in range(3)):
-        m = finder.order(axis)
-        if m > 1:
-            candidates += list(axis_rotations(axis, 2.0 * np.pi * np.arange(1, m) / m))
-            candidates += _perpendicular_flips(finder, samples, axis, m)
-    found = [np.eye(3)]
-    for R in _unique(candidates):
-        # within tol, a turn a fraction of a degree off a symmetry maps too: keep the first (exact) one
-        if not any(geometry.rotation_distance(R, S) < _SAME_RAD for S in found) and finder.maps(R):
-            found.append(R)
-    return [geometry.from_rotation(R, com - R @ com) for R in found]
-
-
-def equivalent_transforms(mesh: trimesh.Trimesh, com: np.ndarray, tol: float = 0.0005) -> np.ndarray:
-    """Part-frame transforms ``(m, 4, 4)`` that map the part onto itself (about the centre of mass).
-
-    :func:`part_symmetries`, whose surfaces of revolution get turns in 10 deg steps only (an error could
-    keep 5 deg of a turn that changes nothing), times every 1 deg turn about the axis of revolution when
-    the part has one (a principal axis about which turns of 7 and 31 deg map it onto itself).
-    """
-    group = np.asarray(part_symmetries(mesh, com, tol))
-    finder = SymmetryFinder(mesh, np.asarray(mesh.convex_hull.vertices), com, tol=tol, corners=False)
-    for axis in principal_frame(mesh).T:
-        if all(finder.maps(R) for R in axis_rotations(axis, np.radians([7.0, 31.0]))):
-            turns = [geometry.from_rotation(R, com - R @ com) for R in axis_rotations(axis, np.radians(np.arange(360)))]
-            return np.einsum("aij,bjk->abik", group, np.asarray(turns)).reshape(-1, 4, 4)
-    return group
-
-
-def nearest_equivalent_error(T_est: np.ndarray, T_true: np.ndarray, syms: np.ndarray) -> tuple[float, float]:
-    """``(mm, deg)`` of ``T_est`` against the nearest ``T_true @ S`` (the same solid in the same place)."""
-    eq = np.einsum("ij,sjk->sik", T_true, syms)
-    pos = 1000.0 * np.linalg.norm(eq[:, :3, 3] - T_est[:3, 3], axis=1)
-    cos = (np.einsum("ij,sij->s", T_est[:3, :3], eq[:, :3, :3]) - 1.0) / 2.0
-    rot = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-    i = int(np.argmin(pos + rot))
-    return float(pos[i]), float(rot[i])
