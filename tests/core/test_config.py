@@ -144,3 +144,9 @@ def test_a_misspelt_key_in_any_section_exits_2_naming_its_path(section, tmp_path
     assert main(["validate", str(bad)]) == 2
     err = capsys.readouterr().err
     assert f"{dotted}: unknown key" in err and "Traceback" not in err and err.count("\n") == 1
+
+
+def test_every_setting_of_the_run_config_is_described() -> None:
+    """``plugins --settings`` shows a description for each key of the run config's own sections."""
+    undescribed = [key for key, _, _, text in describe_settings(RunConfig) if not text]
+    assert not undescribed, undescribed
