@@ -25,7 +25,7 @@ log = logging.getLogger("asmteach")
 
 def _print_settings(title: str, model: type, prefix: str = "") -> None:
     """One block of ``plugins --settings``: a title line, then ``key  type  default  description`` rows."""
-    from asmteach.core.config import describe_settings
+    from asmteach.core.settings_listing import describe_settings
 
     rows = describe_settings(model, prefix)
     print(f"{title}:" if rows else f"{title}: no settings")

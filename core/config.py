@@ -12,10 +12,7 @@ Every error is one line giving the key path and the reason, e.g.
 
 from __future__ import annotations
 
-import json
 import math
-import types
-import typing
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -34,10 +31,8 @@ __all__ = [
     "SceneSettings",
     "TableSettings",
     "check_finite",
-    "describe_settings",
     "format_validation_error",
     "load_run_config",
-    "nested_model",
     "validate_demo",
     "validate_settings",
 ]
@@ -381,66 +376,3 @@ def set_dotted(tree: dict[str, Any], dotted: str, value: Any) -> None:
             raise UserError(f"cannot set {dotted}: {k} is not a mapping")
         node = nxt
     node[keys[-1]] = value
-
-
-def _type_name(t: Any) -> str:
-    """A readable name of a field's type: ``float``, ``tuple[float, float] | None``, ``'jpg' | 'png'``."""
-    origin, args = typing.get_origin(t), typing.get_args(t)
-    if origin is Annotated:
-        return _type_name(args[0])
-    if origin in (typing.Union, types.UnionType):
-        return " | ".join(_type_name(a) for a in args)
-    if origin is Literal:
-        return " | ".join(repr(a) for a in args)
-    if origin is not None:
-        return f"{getattr(origin, '__name__', str(origin))}[{', '.join(_type_name(a) for a in args)}]"
-    if t is type(None):
-        return "None"
-    return t.__name__ if isinstance(t, type) else str(t).replace("typing.", "")
-
-
-def nested_model(t: Any) -> type[BaseModel] | None:
-    """The model class of a field typed ``Model`` or ``Model | None``; None for any other type."""
-    if isinstance(t, type) and issubclass(t, BaseModel):
-        return t
-    if typing.get_origin(t) in (typing.Union, types.UnionType):
-        models = [a for a in typing.get_args(t) if isinstance(a, type) and issubclass(a, BaseModel)]
-        return models[0] if len(models) == 1 else None
-    return None
-
-
-def describe_settings(model: type[BaseModel], prefix: str = "") -> list[tuple[str, str, str, str]]:
-    """``(key, type, default, description)`` of every setting of ``model``, nested models as dotted keys.
-
-    What ``asmteach plugins --settings`` prints; a field without a default
-    says ``required``, one excluded from YAML (set by the loader) is left out.
-    """
-    rows: list[tuple[str, str, str, str]] = []
-    for name, field in model.model_fields.items():
-        if field.exclude:
-            continue
-        key = f"{prefix}{name}"
-        nested = nested_model(field.annotation)
-        if field.is_required():
-            default = "required"
-        else:
-            value = field.get_default(call_default_factory=True)
-            if isinstance(value, BaseModel):  # a section: what differs from its own defaults, e.g. its plugin
-                value = value.model_dump(mode="json", exclude_defaults=True)
-            try:
-                default = json.dumps(_plain(value))
-            except TypeError:
-                default = repr(value)
-        rows.append((key, _type_name(field.annotation), default, " ".join((field.description or "").split())))
-        if nested is not None:
-            rows += describe_settings(nested, prefix=f"{key}.")
-    return rows
-
-
-def _plain(value: Any) -> Any:
-    """A default as written in YAML: arrays as lists, tuples as lists."""
-    if hasattr(value, "tolist"):
-        return value.tolist()
-    if isinstance(value, tuple):
-        return [_plain(v) for v in value]
-    return value

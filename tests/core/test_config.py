@@ -12,12 +12,11 @@ from asmteach.core.config import (
     ROLE_OF_KEY,
     PluginChoice,
     RunConfig,
-    describe_settings,
     load_run_config,
-    nested_model,
     set_dotted,
 )
 from asmteach.core.errors import UserError
+from asmteach.core.settings_listing import describe_settings, nested_model
 
 
 def test_valid_config_loads(toy_config):

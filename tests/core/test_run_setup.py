@@ -55,8 +55,9 @@ def test_without_a_table_the_robot_keeps_its_own(tmp_path: Path) -> None:
 
 
 def test_a_robot_without_a_table_refuses_a_given_one(tmp_path: Path, toy_dist: Path) -> None:
-    cfg = _config(tmp_path, teacher={"plugin": "toy_teacher"}, robot={"plugin": "toy_robot"},
-                  table={"center": [0.4, 0.0]})
+    cfg = _config(
+        tmp_path, teacher={"plugin": "toy_teacher"}, robot={"plugin": "toy_robot"}, table={"center": [0.4, 0.0]}
+    )
     with pytest.raises(UserError, match=r"table\.center: the robot plugin 'toy_robot' has no table"):
         load_run(cfg)
 
@@ -124,16 +125,22 @@ def test_kill_9_mid_render_leaves_the_older_results_and_the_next_run_replaces_th
     (out / "ground_truth.json").write_text(json.dumps({"structure": "set1_peg_in_hole", "old": True}))
     (out / "frame_0099.jpg").write_text("an older demonstration's frame")
     slow = _config(tmp_path, demo={"frames": 400, "approach_frames": 0, "supersample": 1})
-    proc = subprocess.Popen([sys.executable, "-m", "asmteach.core.cli", "render-demo", str(slow), "--out", str(out)],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "asmteach.core.cli", "render-demo", str(slow), "--out", str(out)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and proc.poll() is None and not list(out.glob(".partial-*/frame_*")):
         time.sleep(0.05)
     assert proc.poll() is None, "render-demo ended before it could be killed"
     proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=10)
-    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["frame_0099.jpg",
-                                                                                    "ground_truth.json"]
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == [
+        "frame_0099.jpg",
+        "ground_truth.json",
+    ]
     assert json.loads((out / "ground_truth.json").read_text())["old"]
 
     quick = tmp_path / "quick"
