@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from asmteach.plugins.robots.nextage.kinematics import rotation_error
+from asmteach.core.arm.kinematics import rotation_error
 from asmteach.plugins.robots.nextage.robot import NextagePyBullet
 
 

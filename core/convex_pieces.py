@@ -49,7 +49,7 @@ spec, for parametric parts) plus the settings; files are written atomically,
 and a damaged or foreign file is rebuilt.
 
 Planning does not use these pieces: its collision checks (FCL) test the exact
-mesh's BVH (:mod:`asmteach.plugins.robots.nextage.collision`), which is
+mesh's BVH (:mod:`asmteach.core.arm.collision`), which is
 mesh-exact contact already. Only physics simulation needs convex pieces.
 
 Units: metres, part frame.

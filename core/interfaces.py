@@ -16,11 +16,12 @@ import abc
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Self
 
 import numpy as np
 import trimesh
 
+from asmteach.core.errors import UserError
 from asmteach.core.failures import FailureKind
 from asmteach.core.models import (
     AssemblyTask,
@@ -33,8 +34,8 @@ from asmteach.core.models import (
     Plan,
     StrictModel,
     TablePlane,
-    Trajectory,
 )
+from asmteach.core.robot import PlanningScene, RobotModel
 
 __all__ = [
     "ROLES",
@@ -278,143 +279,100 @@ class Obstacle:
     T_world: np.ndarray
 
 
-class Robot(Plugin):
-    """A robot with kinematics, collision checking and (optionally) a simulator.
+class Robot(Plugin, RobotModel):
+    """The robot the config's ``robot:`` section builds: a :class:`RobotModel` with its current planning scene.
 
-    Arms are named (``"left"``, ``"right"``); each arm's configuration is a
-    ``(dof,)`` array of joint positions in radians in the order of
-    :meth:`joint_names`. The TCP follows :class:`HandSpec`'s frame.
+    The contracts themselves are in :mod:`asmteach.core.robot`: planners need
+    the :class:`RobotModel` and a :class:`PlanningScene` (:attr:`scene`); the
+    pipeline also needs a :class:`World` to run in, so a robot plugin the
+    pipeline can run subclasses both (``class MyRobot(Robot, World)``).
     Use as a context manager so a simulator is always closed::
 
         with registry.create("robots", "nextage_pybullet", settings) as robot:
             ...
+
+    The methods below that change the scene (:meth:`set_obstacles`,
+    :meth:`attach`, :meth:`set_configuration`) replace :attr:`scene` with a new
+    value and never move the world; the queries ask :attr:`scene`. They are
+    kept for planners written against one mutable robot; new code passes
+    :class:`PlanningScene` values instead.
     """
 
-    # -- description
+    _scene: PlanningScene | None = None
+
+    # -- the planning scene
     @property
-    @abc.abstractmethod
-    def arms(self) -> list[str]:
-        """Names of the arms, preferred first."""
+    def scene(self) -> PlanningScene:
+        """The robot's planning scene now: after a world reset, the arms at home, no obstacles, empty hands."""
+        if self._scene is None:
+            raise NotImplementedError(f"{type(self).__name__} keeps no planning scene (set self.scene when built)")
+        return self._scene
 
-    @property
-    @abc.abstractmethod
-    def hand(self) -> HandSpec:
-        """Geometry of the gripper on every arm."""
+    @scene.setter
+    def scene(self, scene: PlanningScene) -> None:
+        self._scene = scene
 
-    @abc.abstractmethod
-    def joint_names(self, arm: str) -> list[str]:
-        """Joint names of ``arm`` in configuration order."""
+    def current(self, arm: str) -> np.ndarray:
+        """Where ``arm`` is now ``(dof,)`` radians: for a robot that is also a :class:`World`, the world's
+        measured joints (:meth:`World.current`); otherwise its configuration in :attr:`scene`."""
+        return np.array(self.scene.configuration[arm], dtype=float)
 
-    @abc.abstractmethod
-    def joint_limits(self, arm: str) -> tuple[np.ndarray, np.ndarray]:
-        """``(lower, upper)`` joint limits of ``arm`` in radians."""
+    def set_configuration(self, arm: str, q: np.ndarray) -> None:
+        """:attr:`scene` with ``arm`` at ``q`` ``(dof,)`` radians (within the joint limits); the world stays."""
+        q = np.asarray(q, dtype=float)
+        lo, hi = self.joint_limits(arm)
+        if q.shape != lo.shape or np.any(q < lo - 1e-6) or np.any(q > hi + 1e-6):
+            raise UserError(
+                f"configuration {np.round(q, 4).tolist()} of arm {arm!r} is outside its joint limits "
+                f"[{np.round(lo, 4).tolist()}, {np.round(hi, 4).tolist()}]"
+            )
+        self.scene = self.scene.with_configuration(arm, np.clip(q, lo, hi))
 
-    @abc.abstractmethod
-    def home(self, arm: str) -> np.ndarray:
-        """A safe resting configuration of ``arm``."""
-
-    # -- kinematics
-    @abc.abstractmethod
-    def fk(self, arm: str, q: np.ndarray) -> np.ndarray:
-        """``T_world_tcp`` (4x4) of ``arm`` at ``q``."""
-
-    @abc.abstractmethod
-    def ik(self, arm: str, T_world_tcp: np.ndarray, q_seed: np.ndarray | None = None) -> IKResult:
-        """Solve for ``q`` with ``fk(arm, q) == T_world_tcp``; never raises on failure."""
-
-    def ik_many(self, arm: str, T_world_tcp: np.ndarray, q_seed: np.ndarray | None = None) -> list[IKResult]:
-        """:meth:`ik` of ``(n, 4, 4)`` targets; ``q_seed`` is one ``(dof,)`` seed or ``(n, dof)`` seeds.
-
-        Planners screen hundreds of grasps this way; robots with a batched
-        solver override it (the default solves one target after the other).
-        """
-        T = np.asarray(T_world_tcp, float).reshape(-1, 4, 4)
-        seeds = [None] * len(T) if q_seed is None else np.broadcast_to(q_seed, (len(T), np.shape(q_seed)[-1]))
-        return [self.ik(arm, t, s) for t, s in zip(T, seeds, strict=True)]
-
-    # -- collision
-    @abc.abstractmethod
     def set_obstacles(self, obstacles: Sequence[Obstacle]) -> None:
-        """Replace the static world used for collision checking (the table is always there)."""
+        """:attr:`scene` with ``obstacles`` (the table is always there)."""
+        self.scene = self.scene.with_obstacles(obstacles)
 
-    @abc.abstractmethod
-    def attach(self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None, *,
-               width: float | None = None) -> None:
-        """Attach ``part`` to ``arm``'s TCP for collision checking (``None`` detaches).
+    def attach(
+        self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None, *, width: float | None = None
+    ) -> None:
+        """:attr:`scene` with ``part`` held by ``arm`` (see :meth:`PlanningScene.with_attached`)."""
+        self.scene = self.scene.with_attached(arm, part, T_tcp_part, width=width)
 
-        ``width`` (metres) is the jaw opening while holding: the fingers are
-        checked closed on the part, where they really are (``None``: left as they are).
-        """
-
-    @abc.abstractmethod
     def in_collision(self, arm: str, qs: np.ndarray, *, ignore: Sequence[str] = ()) -> np.ndarray:
-        """Batch check: ``(n, dof)`` configurations -> ``(n,)`` bool (True = collides).
+        """:meth:`PlanningScene.in_collision` of :attr:`scene`: ``(n, dof)`` -> ``(n,)`` bool."""
+        return self.scene.in_collision(arm, qs, ignore=ignore)
 
-        ``ignore`` names obstacles whose contact with the held part is intended.
-        """
-
-    @abc.abstractmethod
     def clearance(self, arm: str, qs: np.ndarray, upto: float = np.inf) -> np.ndarray:
-        """Batch distance (metres) from the arm, hand and held part to the world; ``(n,)``.
-
-        Distances of ``upto`` or more may come back as ``upto`` (a cost map
-        that is flat beyond some clearance need not pay for exact large ones).
-        """
+        """:meth:`PlanningScene.clearance` of :attr:`scene`: ``(n, dof)`` -> ``(n,)`` metres."""
+        return self.scene.clearance(arm, qs, upto)
 
     def collision_report(self, arm: str, q: np.ndarray) -> list[tuple[str, str]]:
-        """Pairs ``(robot link, obstacle)`` in contact at ``q``; for error messages."""
-        return []
+        """:meth:`PlanningScene.collision_report` of :attr:`scene`."""
+        return self.scene.collision_report(arm, q)
 
     def collision_reports(self, arm: str, qs: np.ndarray) -> list[list[tuple[str, str]]]:
-        """:meth:`collision_report` of each of ``qs`` ``(n, dof)``; a robot with a batched checker may do it in
-        one pass (the regrasp planner explains every grasp it rejects for a collision)."""
-        return [self.collision_report(arm, q) for q in np.atleast_2d(np.asarray(qs, float))]
+        """:meth:`PlanningScene.collision_reports` of :attr:`scene`."""
+        return self.scene.collision_reports(arm, qs)
 
-    # -- simulation (robots without a simulator may leave these unimplemented)
-    def reset_world(self, table: TablePlane, parts: dict[str, tuple[PartModel, np.ndarray]]) -> None:
-        """Start a fresh simulated world: the table and parts at ``T_world_part``."""
-        raise NotImplementedError(f"{type(self).__name__} has no simulator")
-
-    def execute(self, trajectory: Trajectory) -> None:
-        """Run a time-parametrised trajectory in the simulator."""
-        raise NotImplementedError(f"{type(self).__name__} has no simulator")
-
-    def grip(self, arm: str, close: bool, part: str | None = None) -> bool:
-        """Close (holding ``part``) or open the gripper; returns True when holding."""
-        raise NotImplementedError(f"{type(self).__name__} has no simulator")
-
-    def part_pose(self, name: str) -> np.ndarray:
-        """Simulated ground-truth ``T_world_part`` of a spawned part."""
-        raise NotImplementedError(f"{type(self).__name__} has no simulator")
-
-    def speed_limits(self, arm: str) -> np.ndarray:
-        """Joint speed limits ``(dof,)`` in rad/s that trajectories for ``arm`` must respect."""
-        return np.ones(len(self.joint_names(arm)))
-
-    def sense_depth(self) -> tuple[np.ndarray, np.ndarray]:
-        """Simulated depth camera: ``(depth image (h, w) metres, cloud (n, 3) world frame)``."""
-        raise NotImplementedError(f"{type(self).__name__} has no depth camera")
-
-    def camera_pose(self) -> np.ndarray:
-        """``T_world_cam`` (4x4, metres, OpenCV camera frame: z forward, y down) of the depth camera."""
-        raise NotImplementedError(f"{type(self).__name__} has no depth camera")
-
-    def verify_plan(self, plan: Plan, parts: dict[str, tuple[PartModel, np.ndarray]], table: TablePlane,
-                    resolution: float = 0.005) -> Any:
+    # -- an independent check
+    def verify_plan(
+        self, plan: Plan, parts: dict[str, tuple[PartModel, np.ndarray]], table: TablePlane, resolution: float = 0.005
+    ) -> Any:
         """Re-check ``plan`` with a collision model independent of the planner's.
 
         ``parts`` maps a part name to its model and start pose ``T_world_part``
         (metres); arms start at :meth:`home`; ``resolution`` is the largest
         motion (metres) of any robot or held-part point between checks. Returns
         a pydantic model with at least ``ok: bool``, ``collisions: list`` and
-        ``summary() -> str``.
+        ``summary() -> str``. Optional: :class:`NotImplementedError` when the
+        robot has no second collision model (the run then skips the re-check).
         """
         raise NotImplementedError(f"{type(self).__name__} has no independent plan check")
 
     def close(self) -> None:
         """Release the simulator and any other resources."""
 
-    def __enter__(self) -> Robot:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -33,12 +33,12 @@ import numpy as np
 from pydantic import Field
 
 from asmteach.core import geometry
+from asmteach.core.arm.robot import ArmRobot, ArmRobotSettings, ArmSpec
+from asmteach.core.arm.sim import GripperJoints
 from asmteach.core.errors import UserError
 from asmteach.core.models import Mat4
-from asmteach.plugins.robots.nextage.arm_robot import ArmRobot, ArmRobotSettings, ArmSpec
 from asmteach.plugins.robots.nextage.build_urdf import GRIPPER, URDF_PATH
 from asmteach.plugins.robots.nextage.hand import nextage_hand
-from asmteach.plugins.robots.nextage.sim import GripperJoints
 from asmteach.plugins.robots.nextage.vendor import vendor_urdf
 
 __all__ = ["INIT_POSE", "READY_POSE", "SRDF_DISABLED", "NextagePyBullet"]

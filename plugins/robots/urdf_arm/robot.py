@@ -29,10 +29,10 @@ from pathlib import Path
 import numpy as np
 from pydantic import Field, model_validator
 
+from asmteach.core.arm.robot import ArmRobot, ArmRobotSettings, ArmSpec
+from asmteach.core.arm.sim import GripperJoints
 from asmteach.core.errors import UserError
 from asmteach.core.models import HandSpec, Mat4, StrictModel
-from asmteach.plugins.robots.nextage.arm_robot import ArmRobot, ArmRobotSettings, ArmSpec
-from asmteach.plugins.robots.nextage.sim import GripperJoints
 
 __all__ = ["UrdfArm", "UrdfArmSettings", "resolve_urdf"]
 
@@ -113,7 +113,7 @@ class UrdfArm(ArmRobot):
                               list(a.finger_links))
             arms[name] = ArmSpec(list(a.joints), a.tcp_link, home, g, list(a.hand_links))
         # The home may be None until the kinematics know the limits: fill it in with zeros clipped to them.
-        from asmteach.plugins.robots.nextage.kinematics import Kinematics
+        from asmteach.core.arm.kinematics import Kinematics
 
         probe = Kinematics(urdf, {n: (s.joints, s.tcp_link) for n, s in arms.items()}, st.base_pose, st.ik)
         for n, s in arms.items():

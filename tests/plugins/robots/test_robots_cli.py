@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from asmteach.core.cli import main
-from asmteach.plugins.robots.experiment import Reachability, ReachabilityParams, grasp_pose
+from asmteach.plugins.robots.nextage.experiment import Reachability, ReachabilityParams, grasp_pose
 from asmteach.plugins.robots.nextage.build_urdf import URDF_PATH
 
 

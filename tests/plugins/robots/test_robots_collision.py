@@ -91,7 +91,7 @@ def test_batch_equals_single_and_clearance(robot: NextagePyBullet) -> None:
 def test_pruned_clearance_equals_every_pair_measured(robot: NextagePyBullet) -> None:
     import fcl
 
-    from asmteach.plugins.robots.nextage.collision import _tf
+    from asmteach.core.arm.collision import _tf
 
     block = trimesh.creation.box((0.08, 0.06, 0.05))
     T = np.eye(4)
@@ -135,10 +135,11 @@ def test_a_held_part_closes_the_fingers_of_the_collision_model_on_it(robot: Next
     cube = PartModel(spec=spec, mesh=trimesh.creation.box((0.03, 0.03, 0.03)), mass=0.05, center_of_mass=np.zeros(3))
     T = np.eye(4)
     T[2, 3] = 0.02
+    q = robot.home("left")
     robot.attach("left", cube, T, width=0.03)
+    robot.in_collision("left", q[None])  # the robot's checker takes the scene on when asked about it
     assert values() == pytest.approx([0.015, 0.015])
     T_tcp = robot.fk("left", robot.home("left"))
-    q = robot.home("left")
     # a thin plate (normal along the jaw axis) 10 mm beyond the closed finger's outer face (15 + 10 mm
     # from the TCP) but through the open finger (inner face 42.5 mm out, 10 mm thick)
     plate = trimesh.creation.box((0.2, 0.002, 0.2))
@@ -147,8 +148,9 @@ def test_a_held_part_closes_the_fingers_of_the_collision_model_on_it(robot: Next
     robot.set_obstacles([Obstacle("plate", plate, T_plate)])
     closed_free = not robot.in_collision("left", q[None])[0]
     robot.attach("left", None)
+    open_hits = robot.in_collision("left", q[None])[0]
     assert values() == pytest.approx(list(opened))
-    assert closed_free and robot.in_collision("left", q[None])[0]
+    assert closed_free and open_hits
     robot.set_obstacles([])
 
 
@@ -156,7 +158,7 @@ def test_batch_verdict_equals_every_candidate_pair_tested_with_fcl(robot: Nextag
     import fcl
     import pinocchio as pin
 
-    from asmteach.plugins.robots.nextage.collision import _tf
+    from asmteach.core.arm.collision import _tf
 
     # a block and a held peg, so that boxes, cylinders and meshes all meet
     T = np.eye(4)
@@ -169,7 +171,7 @@ def test_batch_verdict_equals_every_candidate_pair_tested_with_fcl(robot: Nextag
     robot.attach("right", peg, held)
     lo, hi = robot.joint_limits("right")
     qs = np.random.default_rng(11).uniform(lo, hi, size=(150, 6))
-    ch = robot.checker
+    ch = robot._binding.checker_at(robot.scene, "right")  # the checker holding the robot's scene
     objs, A, B, _ = ch._pair_set("right", ())
     poses = ch._poses("right", qs, objs)
     kin = ch.kin

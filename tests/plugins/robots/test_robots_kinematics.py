@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from asmteach.core.arm.kinematics import flip_jaw, rotation_error
 from asmteach.core.errors import UserError
-from asmteach.plugins.robots.nextage.kinematics import flip_jaw, rotation_error
 from asmteach.plugins.robots.nextage.robot import NextagePyBullet
 
 

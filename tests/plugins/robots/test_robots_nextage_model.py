@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from asmteach.core.arm.kinematics import Kinematics
+from asmteach.core.arm.sim import PyBulletWorld
+from asmteach.core.arm.urdf_check import check_urdf
 from asmteach.core.errors import UserError
 from asmteach.plugins.robots.nextage.build_urdf import URDF_PATH, build_urdf
-from asmteach.plugins.robots.nextage.kinematics import Kinematics
-from asmteach.plugins.robots.nextage.sim import PyBulletWorld
-from asmteach.plugins.robots.nextage.urdf_check import check_urdf
 
 ARMS = {
     "left": ([f"LARM_JOINT{k}" for k in range(6)], "LARM_TCP_Link"),

@@ -7,8 +7,8 @@ import pinocchio as pin
 import pytest
 from scipy.spatial.transform import Rotation
 
+from asmteach.core.arm.batch_ik import _ChainSolver, _log6_error, _rotvec, ik_many
 from asmteach.core.interfaces import IKResult, Robot
-from asmteach.plugins.robots.nextage.batch_ik import _ChainSolver, _log6_error, _rotvec, ik_many
 from asmteach.plugins.robots.nextage.robot import NextagePyBullet
 
 FLIP = np.diag([-1.0, -1.0, 1.0, 1.0])

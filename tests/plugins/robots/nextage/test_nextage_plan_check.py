@@ -6,19 +6,19 @@ import numpy as np
 import pybullet
 import pytest
 
-from asmteach.core.errors import UserError
-from asmteach.core.models import GripperEvent, PartSpec, Plan, PlanSegment, Primitive, SolidSpec, TablePlane, Trajectory
-from asmteach.core.parts import build_part
-from asmteach.plugins.planners.regrasp.assembly import cartesian_path
-from asmteach.plugins.robots.nextage.plan_check import (
+from asmteach.core.arm.plan_check import (
     CheckedArm,
     PlanCheck,
     PlanChecker,
     densify_by_reach,
     recheck_plan,
 )
+from asmteach.core.arm.sim import PyBulletWorld
+from asmteach.core.errors import UserError
+from asmteach.core.models import GripperEvent, PartSpec, Plan, PlanSegment, Primitive, SolidSpec, TablePlane, Trajectory
+from asmteach.core.parts import build_part
+from asmteach.plugins.planners.regrasp.assembly import cartesian_path
 from asmteach.plugins.robots.nextage.robot import NextagePyBullet
-from asmteach.plugins.robots.nextage.sim import PyBulletWorld
 
 TABLE = TablePlane(height=0.0)
 

@@ -29,8 +29,8 @@ import math
 import numpy as np
 import pinocchio as pin
 
+from asmteach.core.arm.kinematics import ArmChain, Kinematics, flip_jaw
 from asmteach.core.interfaces import IKResult
-from asmteach.plugins.robots.nextage.kinematics import ArmChain, Kinematics, flip_jaw
 
 __all__ = ["ik_many"]
 

@@ -1,4 +1,4 @@
-"""CLI commands of the robots room: ``asmteach robot-check``.
+"""CLI commands of the URDF arm: ``asmteach robot-check``.
 
 ``asmteach robot-check URDF [--joints J1,J2,... --tcp LINK]`` parses a URDF
 (errors name the file and the element), loads it in pinocchio and PyBullet,
@@ -22,8 +22,8 @@ __all__ = ["asmteach_add_commands", "robot_check"]
 
 def robot_check(urdf: str, joints: list[str] | None, tcp: str | None, samples: int = 50, seed: int = 0) -> int:
     """Check a URDF; print a report; return the exit code."""
-    from asmteach.plugins.robots.nextage.kinematics import Kinematics
-    from asmteach.plugins.robots.nextage.sim import PyBulletWorld
+    from asmteach.core.arm.kinematics import Kinematics
+    from asmteach.core.arm.sim import PyBulletWorld
     from asmteach.plugins.robots.urdf_arm.robot import resolve_urdf
 
     path = resolve_urdf(urdf)
@@ -36,8 +36,10 @@ def robot_check(urdf: str, joints: list[str] | None, tcp: str | None, samples: i
     m = kin.model
     for j in range(1, m.njoints):
         q = m.joints[j].idx_q
-        print(f"  {m.names[j]:<28s} [{m.lowerPositionLimit[q]: .4f}, {m.upperPositionLimit[q]: .4f}] rad, "
-              f"speed {m.velocityLimit[q]:.3f}")
+        print(
+            f"  {m.names[j]:<28s} [{m.lowerPositionLimit[q]: .4f}, {m.upperPositionLimit[q]: .4f}] rad, "
+            f"speed {m.velocityLimit[q]:.3f}"
+        )
     if not arms:
         return 0
     sim = PyBulletWorld(path, np.eye(4))

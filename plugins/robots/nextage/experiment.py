@@ -26,10 +26,10 @@ import numpy as np
 from pydantic import Field
 
 from asmteach.core import registry
+from asmteach.core.arm.kinematics import rotation_error
 from asmteach.core.io import atomic_path, write_text
 from asmteach.core.models import StrictModel
 from asmteach.core.sweep import Experiment
-from asmteach.plugins.robots.nextage.kinematics import rotation_error
 
 __all__ = ["Reachability", "ReachabilityParams", "grasp_pose"]
 

@@ -25,10 +25,10 @@ import numpy as np
 import pinocchio as pin
 from pydantic import Field
 
+from asmteach.core.arm.urdf_check import UrdfInfo, check_urdf
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import IKResult
 from asmteach.core.models import StrictModel
-from asmteach.plugins.robots.nextage.urdf_check import UrdfInfo, check_urdf
 
 __all__ = ["ArmChain", "IKSettings", "Kinematics", "flip_jaw", "rotation_error"]
 

@@ -5,7 +5,7 @@ The planners check their motions with this project's own collision model
 :class:`~asmteach.core.models.Plan` kinematically in a separate PyBullet DIRECT
 client instead: PyBullet's own forward kinematics of the same URDF
 (``resetJointState``), the table and parts spawned by
-:class:`~asmteach.plugins.robots.nextage.sim.PyBulletWorld` with the collision
+:class:`~asmteach.core.arm.sim.PyBulletWorld` with the collision
 shapes execution uses, and Bullet's narrow phase (``getClosestPoints``). No
 physics is stepped.
 
@@ -57,10 +57,10 @@ import pybullet
 from pydantic import Field
 
 from asmteach.core import geometry
+from asmteach.core.arm.sim import PyBulletWorld
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import GripperEvent, Plan, StrictModel
-from asmteach.plugins.robots.nextage.sim import PyBulletWorld
 
 __all__ = [
     "OTHER_PARTS",

@@ -1,10 +1,14 @@
-"""The :class:`Robot` interface on top of pinocchio kinematics, fcl collision and a PyBullet world.
+"""An arm robot on pinocchio kinematics, fcl collision and a PyBullet world: a :class:`Robot` and a :class:`World`.
 
-Shared by :class:`~asmteach.plugins.robots.nextage.robot.NextagePyBullet` and
-:class:`~asmteach.plugins.robots.urdf_arm.robot.UrdfArm`; a subclass only says
-where its URDF, arms, gripper and home are. The simulator starts lazily (the
-first :meth:`reset_world`), so planners that only need kinematics and collision
-checking never pay for PyBullet.
+The base of the robot plugins that load a URDF (the Nextage, ``urdf_arm``); a
+subclass only says where its URDF, arms, gripper and home are. The simulator
+starts lazily (the first :meth:`reset_world`), so planners that only need
+kinematics and collision checking never pay for PyBullet.
+
+Planning and the world are kept apart: :attr:`ArmRobot.scene` is an
+:class:`~asmteach.core.arm.scene.ArmScene` value, and changing it (or querying
+another scene) never moves the simulator; :meth:`execute`, :meth:`grip` and
+:meth:`reset_world` move the world and then set :attr:`scene` to match it.
 
 Frames: world, z up, metres; ``T_world_tcp`` follows :class:`HandSpec` (z =
 approach out of the palm, y = jaw axis).
@@ -19,16 +23,18 @@ import numpy as np
 import trimesh
 from pydantic import Field
 
+from asmteach.core.arm.batch_ik import ik_many
+from asmteach.core.arm.collision import CollisionChecker
+from asmteach.core.arm.kinematics import IKSettings, Kinematics
+from asmteach.core.arm.plan_check import CheckedArm, PlanCheck, recheck_plan
+from asmteach.core.arm.scene import ArmScene, SceneBinding
+from asmteach.core.arm.sim import POSITION_GAIN, GripperJoints, PyBulletWorld
 from asmteach.core.errors import UserError
-from asmteach.core.interfaces import IKResult, Obstacle, PartModel, Robot
+from asmteach.core.interfaces import IKResult, PartModel, Robot
 from asmteach.core.models import HandSpec, Plan, StrictModel, TablePlane, Trajectory
-from asmteach.plugins.robots.nextage.batch_ik import ik_many
-from asmteach.plugins.robots.nextage.collision import CollisionChecker
-from asmteach.plugins.robots.nextage.kinematics import IKSettings, Kinematics
-from asmteach.plugins.robots.nextage.plan_check import CheckedArm, PlanCheck, recheck_plan
-from asmteach.plugins.robots.nextage.sim import POSITION_GAIN, GripperJoints, PyBulletWorld
+from asmteach.core.robot import World
 
-__all__ = ["ArmRobot", "ArmRobotSettings", "CameraMount"]
+__all__ = ["ArmRobot", "ArmRobotSettings", "ArmSpec", "CameraMount"]
 
 
 class CameraMount(StrictModel):
@@ -52,8 +58,11 @@ class ArmRobotSettings(StrictModel):
     grip_force: float = Field(40.0, gt=0.0, description="finger force, newtons")
     time_step: float = Field(1.0 / 240.0, gt=0.0, le=0.01, description="physics step, seconds")
     position_gain: float = Field(
-        POSITION_GAIN, gt=0.0, le=1.0,
-        description="positionGain of the simulated joint servos; PyBullet's default 0.1 leaves ~1 mrad steady error")
+        POSITION_GAIN,
+        gt=0.0,
+        le=1.0,
+        description="positionGain of the simulated joint servos; PyBullet's default 0.1 leaves ~1 mrad steady error",
+    )
     camera: CameraMount = Field(default_factory=CameraMount)
 
 
@@ -68,7 +77,7 @@ class ArmSpec:
     hand_links: list[str]
 
 
-class ArmRobot(Robot):
+class ArmRobot(Robot, World):
     """A robot with named arms, a parallel gripper per arm and a simulated world."""
 
     Settings = ArmRobotSettings
@@ -79,28 +88,42 @@ class ArmRobot(Robot):
         self._ik_rng = self.rng(7)
         self._sim: PyBulletWorld | None = None
         self._table = TablePlane(height=self.settings.table_height)
+        self._world_q: dict[str, np.ndarray] = {}  # arm -> joints in the world (radians)
 
-    def _setup(self, urdf, T_world_base: np.ndarray, arms: dict[str, ArmSpec], hand: HandSpec,
-               disabled: Sequence[tuple[str, str]]) -> None:
+    def _setup(
+        self,
+        urdf,
+        T_world_base: np.ndarray,
+        arms: dict[str, ArmSpec],
+        hand: HandSpec,
+        disabled: Sequence[tuple[str, str]],
+    ) -> None:
         """Called by subclasses once they know their robot."""
         self.urdf = urdf
         self.T_world_base = np.asarray(T_world_base, dtype=float)
         self._arms = arms
         self._hand = hand
-        self.kin = Kinematics(urdf, {a: (s.joints, s.tcp_link) for a, s in arms.items()}, self.T_world_base,
-                              self.settings.ik, homes={a: s.home for a, s in arms.items()})
-        for a, s in arms.items():
-            self.kin.set_arm(a, s.home)
-            self._set_fingers(a, s.gripper.open_values)
-        self.checker = CollisionChecker(self.kin, disabled=disabled,
-                                        hand_links={a: s.hand_links for a, s in arms.items()})
+        self.kin = Kinematics(
+            urdf,
+            {a: (s.joints, s.tcp_link) for a, s in arms.items()},
+            self.T_world_base,
+            self.settings.ik,
+            homes={a: s.home for a, s in arms.items()},
+        )
+        self.checker = CollisionChecker(
+            self.kin, disabled=disabled, hand_links={a: s.hand_links for a, s in arms.items()}
+        )
         st = self.settings
         self.checker.set_table(st.table_center, st.table_size, st.table_height)
+        self._binding = SceneBinding(self.kin, self.checker, {a: s.gripper for a, s in arms.items()})
+        for a, s in arms.items():  # the kinematic state at home, hands open: the state subclasses inspect
+            self.kin.set_arm(a, s.home)
+            self._set_fingers(a, s.gripper.open_values)
+        self._world_q = {a: s.home.copy() for a, s in arms.items()}
+        self.scene = ArmScene(self._binding, self._world_q)
 
     def _set_fingers(self, arm: str, values: Sequence[float]) -> None:
-        m = self.kin.model
-        for jn, v in zip(self._arms[arm].gripper.finger_joints, values, strict=True):
-            self.kin.q_full[m.joints[m.getJointId(jn)].idx_q] = float(v)
+        self._binding.set_fingers(arm, values)
 
     # ------------------------------------------------------------ description
     @property
@@ -131,15 +154,13 @@ class ArmRobot(Robot):
         return self._arm(arm).home.copy()
 
     def current(self, arm: str) -> np.ndarray:
-        """The arm's current configuration (simulated when running, else the last one set)."""
-        return self.kin.get_arm(arm)
+        """The arm's joints in the world (where the last trajectory ended; home after a reset), radians."""
+        self._arm(arm)
+        return self._world_q[arm].copy()
 
     def set_configuration(self, arm: str, q: np.ndarray) -> None:
-        """Teleport the arm (kinematic state and simulator); checks the limits."""
-        q = self.kin.check_limits(arm, q)
-        self.kin.set_arm(arm, q)
-        if self._sim is not None:
-            self._sim.set_joints(self.joint_names(arm), q)
+        """:attr:`scene` with the arm at ``q`` (checked against the limits); the simulator stays where it is."""
+        self.scene = self.scene.with_configuration(arm, self.kin.check_limits(arm, q))
 
     # ------------------------------------------------------------ kinematics
     def fk(self, arm: str, q: np.ndarray) -> np.ndarray:
@@ -156,49 +177,26 @@ class ArmRobot(Robot):
 
     def ik_many(self, arm: str, T_world_tcp: np.ndarray, q_seed: np.ndarray | None = None) -> list[IKResult]:
         if arm not in self._arms:
-            return [IKResult(False, None, reason=f"unknown arm {arm!r}; this robot has {self.arms}")
-                    for _ in np.asarray(T_world_tcp).reshape(-1, 4, 4)]
-        return ik_many(self.kin, arm, T_world_tcp, q_seed if q_seed is not None else self.current(arm),
-                       rng=self._ik_rng)
-
-    # ------------------------------------------------------------ collision
-    def set_obstacles(self, obstacles: Sequence[Obstacle]) -> None:
-        self.checker.set_obstacles(obstacles)
-
-    def attach(self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None, *,
-               width: float | None = None) -> None:
-        self._arm(arm)
-        self.checker.attach(arm, part, T_tcp_part)
-        opened = np.asarray(self._arms[arm].gripper.open_values, float)
-        if part is None:
-            self._set_fingers(arm, opened)
-        elif width is not None:
-            # each finger's inner face sits half the opening from the TCP (as in the simulator and the re-check)
-            self._set_fingers(arm, np.minimum(opened, 0.5 * float(width)))
-
-    def in_collision(self, arm: str, qs: np.ndarray, *, ignore: Sequence[str] = ()) -> np.ndarray:
-        self._arm(arm)
-        return self.checker.in_collision(arm, qs, ignore=ignore)
-
-    def clearance(self, arm: str, qs: np.ndarray, upto: float = np.inf) -> np.ndarray:
-        self._arm(arm)
-        return self.checker.clearance(arm, qs, upto)
-
-    def collision_report(self, arm: str, q: np.ndarray) -> list[tuple[str, str]]:
-        self._arm(arm)
-        return self.checker.report(arm, q)
-
-    def collision_reports(self, arm: str, qs: np.ndarray) -> list[list[tuple[str, str]]]:
-        self._arm(arm)
-        return self.checker.reports(arm, qs)
+            return [
+                IKResult(False, None, reason=f"unknown arm {arm!r}; this robot has {self.arms}")
+                for _ in np.asarray(T_world_tcp).reshape(-1, 4, 4)
+            ]
+        return ik_many(
+            self.kin, arm, T_world_tcp, q_seed if q_seed is not None else self.current(arm), rng=self._ik_rng
+        )
 
     # ------------------------------------------------------------ simulation
     @property
     def sim(self) -> PyBulletWorld:
         """The PyBullet world (started on first use)."""
         if self._sim is None:
-            self._sim = PyBulletWorld(self.urdf, self.T_world_base, gui=self.settings.gui,
-                                      time_step=self.settings.time_step, position_gain=self.settings.position_gain)
+            self._sim = PyBulletWorld(
+                self.urdf,
+                self.T_world_base,
+                gui=self.settings.gui,
+                time_step=self.settings.time_step,
+                position_gain=self.settings.position_gain,
+            )
             for a, s in self._arms.items():
                 self._sim.set_joints(s.joints, self.kin.get_arm(a))
                 self._sim.set_joints(s.gripper.finger_joints, s.gripper.open_values)
@@ -209,10 +207,9 @@ class ArmRobot(Robot):
         st = self.settings
         self._table = table
         self.checker.set_table(st.table_center, st.table_size, table.height)
-        self.checker.held.clear()
-        for a, s in self._arms.items():
-            self.kin.set_arm(a, s.home)
-            self._set_fingers(a, s.gripper.open_values)
+        self._binding.invalidate()
+        self._world_q = {a: s.home.copy() for a, s in self._arms.items()}
+        self.scene = ArmScene(self._binding, self._world_q)
         self.sim.reset_world(st.table_center, st.table_size, table.height, parts)
         for s in self._arms.values():
             self.sim.set_joints(s.joints, s.home)
@@ -232,8 +229,10 @@ class ArmRobot(Robot):
         start_gap = np.abs(pos[0] - self.current(arm))
         if np.max(start_gap) > self.settings.start_tolerance:
             k = int(np.argmax(start_gap))
-            raise UserError(f"trajectory for arm {arm!r} starts {start_gap[k]:.3f} rad away from the current "
-                            f"{names[k]}; start it at the current configuration")
+            raise UserError(
+                f"trajectory for arm {arm!r} starts {start_gap[k]:.3f} rad away from the current "
+                f"{names[k]}; start it at the current configuration"
+            )
         if len(times) > 1:
             dt = np.diff(times)
             dq = np.abs(np.diff(pos, axis=0))
@@ -242,9 +241,11 @@ class ArmRobot(Robot):
             bad = need > dt[:, None] + 1e-9
             if np.any(bad):
                 i, k = (int(v) for v in np.argwhere(bad)[0])
-                raise UserError(f"trajectory for arm {arm!r} jumps: {names[k]} moves {dq[i, k]:.3f} rad in "
-                                f"{dt[i]:.3f} s between waypoints {i} and {i + 1} (limit {limit[k]:.2f} rad/s); "
-                                "re-time it or add waypoints")
+                raise UserError(
+                    f"trajectory for arm {arm!r} jumps: {names[k]} moves {dq[i, k]:.3f} rad in "
+                    f"{dt[i]:.3f} s between waypoints {i} and {i + 1} (limit {limit[k]:.2f} rad/s); "
+                    "re-time it or add waypoints"
+                )
         return times, pos
 
     def execute(self, trajectory: Trajectory) -> None:
@@ -257,8 +258,9 @@ class ArmRobot(Robot):
             times, pos = np.array([0.0, 0.0]), np.vstack([pos, pos])
         ids = sim.joint_ids(names)
         forces = np.array([max(sim.p.getJointInfo(sim.robot, j)[10], 1.0) for j in ids]) * 2.0
-        final = sim.track(names, times, pos, self.speed_limits(arm), forces)
-        self.kin.set_arm(arm, np.clip(final, *self.joint_limits(arm)))
+        final = np.clip(sim.track(names, times, pos, self.speed_limits(arm), forces), *self.joint_limits(arm))
+        self._world_q[arm] = final
+        self.scene = self.scene.with_configuration(arm, final)
 
     def grip(self, arm: str, close: bool, part: str | None = None) -> bool:
         """Close to contact and weld ``part`` to the TCP (True when held), or open and release."""
@@ -266,16 +268,18 @@ class ArmRobot(Robot):
         s = self.sim
         speed = max(abs(s.p.getJointInfo(s.robot, s.joint_index[g.finger_joints[0]])[11]), 0.05)
         held = s.grip(arm, g, close, part, self.settings.grip_force, speed)
-        self._set_fingers(arm, s.get_joints(g.finger_joints))
         if held and part is not None:
             T_tcp_part = np.linalg.solve(self.fk(arm, self.current(arm)), s.part_pose(part))
-            self.checker.attach(arm, s.parts[part][1], T_tcp_part)
+            # the jaw as wide as the fingers stand now (each finger joint is half the opening)
+            width = float(np.sum(np.abs(s.get_joints(g.finger_joints))))
+            self.scene = self.scene.with_attached(arm, s.parts[part][1], T_tcp_part, width=width)
         elif not close:
-            self.checker.attach(arm, None)
+            self.scene = self.scene.with_attached(arm, None)
         return held
 
-    def verify_plan(self, plan: Plan, parts: dict[str, tuple[PartModel, np.ndarray]], table: TablePlane,
-                    resolution: float = 0.005) -> PlanCheck:
+    def verify_plan(
+        self, plan: Plan, parts: dict[str, tuple[PartModel, np.ndarray]], table: TablePlane, resolution: float = 0.005
+    ) -> PlanCheck:
         """Re-check ``plan`` independently of the planner's collision model, in PyBullet.
 
         Replays the plan kinematically in a separate PyBullet DIRECT client built from this
@@ -288,19 +292,37 @@ class ArmRobot(Robot):
         part, or two robot links (except links joined by a joint and the pairs this robot never
         checks); allowed are the holding hand touching its part and the held part touching the
         table on close/lift/place/insert and the other part on close/insert
-        (:data:`~asmteach.plugins.robots.nextage.plan_check.TOUCH_RULES`). The simulator this
+        (:data:`~asmteach.core.arm.plan_check.TOUCH_RULES`). The simulator this
         robot executes in is not touched.
 
-        Returns a :class:`~asmteach.plugins.robots.nextage.plan_check.PlanCheck`: ``ok``, the
+        Returns a :class:`~asmteach.core.arm.plan_check.PlanCheck`: ``ok``, the
         configurations checked, the least signed distance (metres) and every colliding pair with
         its segment index, label, time (s from the segment's start) and penetration (metres).
         """
-        arms = {a: CheckedArm(tuple(s.joints), s.tcp_link, tuple(s.gripper.finger_joints),
-                              tuple(s.gripper.open_values), tuple(s.hand_links)) for a, s in self._arms.items()}
+        arms = {
+            a: CheckedArm(
+                tuple(s.joints),
+                s.tcp_link,
+                tuple(s.gripper.finger_joints),
+                tuple(s.gripper.open_values),
+                tuple(s.hand_links),
+            )
+            for a, s in self._arms.items()
+        }
         st = self.settings
-        return recheck_plan(self.urdf, self.T_world_base, plan, parts, arms, {a: self.home(a) for a in self.arms},
-                            table_center=st.table_center, table_size=st.table_size, table_height=table.height,
-                            skip_pairs=self.checker.disabled, resolution=resolution)
+        return recheck_plan(
+            self.urdf,
+            self.T_world_base,
+            plan,
+            parts,
+            arms,
+            {a: self.home(a) for a in self.arms},
+            table_center=st.table_center,
+            table_size=st.table_size,
+            table_height=table.height,
+            skip_pairs=self.checker.disabled,
+            resolution=resolution,
+        )
 
     def part_pose(self, name: str) -> np.ndarray:
         return self.sim.part_pose(name)
@@ -314,6 +336,10 @@ class ArmRobot(Robot):
 
     def _scene_meshes(self) -> list[tuple[trimesh.Trimesh, np.ndarray]]:
         """Table, parts and the robot's collision primitives at their current world poses."""
+        world = self.scene
+        for a, q in self._world_q.items():
+            world = world.with_configuration(a, q)
+        self._binding.checker_at(world, self.arms[0])  # the kinematic state at the world's joints
         st = self.settings
         table = trimesh.creation.box(extents=[st.table_size[0], st.table_size[1], 0.05])
         T_table = np.eye(4)
@@ -340,7 +366,7 @@ class ArmRobot(Robot):
         of the table and the parts (points on the robot itself are filtered out).
 
         Uses the project's one depth-camera model
-        (:mod:`asmteach.plugins.detectors.depth_camera`) at :meth:`camera_pose`.
+        (:mod:`asmteach.core.perception.depth_camera`) at :meth:`camera_pose`.
         """
         from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
 

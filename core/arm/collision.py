@@ -26,10 +26,10 @@ import numpy as np
 import pinocchio as pin
 import trimesh
 
+from asmteach.core.arm.kinematics import Kinematics
+from asmteach.core.arm.urdf_check import resolve_mesh
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Obstacle, PartModel
-from asmteach.plugins.robots.nextage.kinematics import Kinematics
-from asmteach.plugins.robots.nextage.urdf_check import resolve_mesh
 
 __all__ = ["CollisionChecker", "obb_overlap"]
 
