@@ -29,6 +29,7 @@ from asmteach.core.interfaces import AssemblyProblem, PartModel, Robot
 from asmteach.core.io import describe_os_error, to_jsonable, write_json, write_model
 from asmteach.core.models import AssemblyTask, Detection, Plan, RunReport, StageOutcome, TablePlane
 from asmteach.core.pose_error import nearest_symmetric, pose_error
+from asmteach.core.robot import World
 from asmteach.core.scene import random_start_poses
 from asmteach.core.symmetry import part_symmetries
 
@@ -134,6 +135,9 @@ def run_pipeline(cfg: RunConfig, out_dir: Path, *, pm: Any | None = None) -> Run
 
     setup = prepare_run(cfg)  # every object of the run built and checked before anything is written
     cfg = setup.cfg  # the robot's settings now carry the config's table
+    if not issubclass(registry.get_class("robots", cfg.robot.plugin), World):
+        raise UserError(f"robot.plugin: {cfg.robot.plugin!r} plans but has no world to run in (a robot the run "
+                        "executes on is also an asmteach.core.robot.World: reset, execute, grip, sense)")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     run = _Run(cfg, out, pm)
@@ -394,10 +398,14 @@ def _write_plan_again(run: _Run, plan: Plan) -> None:
 def _execute(run: _Run, robot: Robot, plan: Plan, stage: str = "execute") -> list[np.ndarray]:
     frames: list[np.ndarray] = []
     with run.stage(stage, total=len(plan.segments)) as d:
-        record = run.execution.animation and hasattr(robot, "sense_rgb")
+        record = run.execution.animation
         period = 1.0 / run.execution.animation_fps
         if record:
-            frames.append(robot.sense_rgb())
+            try:
+                frames.append(robot.sense_rgb())
+            except NotImplementedError:  # World.sense_rgb is optional: no colour camera, no animation
+                record = False
+                d["animation"] = f"not recorded: {type(robot).__name__} has no colour camera"
         trace = _ExecutionTrace(robot)
         d["trace"] = trace.events
         for seg in plan.segments:
