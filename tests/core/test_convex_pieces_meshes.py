@@ -16,8 +16,7 @@ import pybullet
 import pytest
 import trimesh
 
-from asmteach.core import convex_pieces
-from asmteach.core.convex_pieces import DecompositionSettings, decompose, fidelity
+from asmteach.core.convex_pieces import DecompositionSettings, decompose, fidelity, route
 from asmteach.core.models import PartSpec
 from asmteach.core.parts import build_part
 
@@ -89,13 +88,19 @@ def _insert_depth(tmp_path: Path, holed, peg, depth: float, max_force: float = 2
         top = 0.03
         half = 0.5 * float(peg.mesh.extents[2])
         z0 = top + 0.002 + half  # peg centre: its tip 2 mm above the hole
-        body = pybullet.createMultiBody(peg.mass, shape(peg, "peg"), -1, [0, 0, z0],
-                                        baseInertialFramePosition=np.asarray(peg.center_of_mass).tolist(),
-                                        physicsClientId=client)
+        body = pybullet.createMultiBody(
+            peg.mass,
+            shape(peg, "peg"),
+            -1,
+            [0, 0, z0],
+            baseInertialFramePosition=np.asarray(peg.center_of_mass).tolist(),
+            physicsClientId=client,
+        )
         for b in (block, body):
             pybullet.changeDynamics(b, -1, lateralFriction=0.3, collisionMargin=0.0, physicsClientId=client)
-        cid = pybullet.createConstraint(body, -1, -1, -1, pybullet.JOINT_FIXED, [0, 0, 0], [0, 0, 0], [0, 0, z0],
-                                        physicsClientId=client)
+        cid = pybullet.createConstraint(
+            body, -1, -1, -1, pybullet.JOINT_FIXED, [0, 0, 0], [0, 0, 0], [0, 0, z0], physicsClientId=client
+        )
         goal = top - depth - 0.002 + half  # 2 mm past the bottom, so the peg presses on it
         for k in range(int(1.6 / dt)):
             z = max(goal, z0 - 0.02 * k * dt)
@@ -155,14 +160,14 @@ def test_a_damaged_cache_file_is_rebuilt(tmp_path: Path) -> None:
     cache = tmp_path / "cache"
     first = decompose(part, settings, cache_dir=cache)
     (path,) = cache.glob("*.npz")
-    convex_pieces._MEMO.clear()  # read the disk, not this process's memo
+    route._MEMO.clear()  # read the disk, not this process's memo
     again = decompose(part, settings, cache_dir=cache)
     assert again.cached and len(again.pieces) == len(first.pieces)
     for a, b in zip(again.pieces, first.pieces, strict=True):
         np.testing.assert_array_equal(a, b)
     path.write_bytes(path.read_bytes()[:200])  # a truncated file, as a killed writer would leave
-    convex_pieces._MEMO.clear()
+    route._MEMO.clear()
     rebuilt = decompose(part, settings, cache_dir=cache)
     assert not rebuilt.cached and len(rebuilt.pieces) == len(first.pieces)
-    convex_pieces._MEMO.clear()
+    route._MEMO.clear()
     assert decompose(part, settings, cache_dir=cache).cached  # and written back whole

@@ -36,7 +36,7 @@ from asmteach.core.cli import main
 from asmteach.core.io import read_jsonl
 from asmteach.core.sweep import run_sweep
 
-MODULE = '''
+MODULE = """
 import os
 import time
 from pathlib import Path
@@ -61,7 +61,7 @@ class Nap(Experiment):
             raise RuntimeError("NAP_FAIL says fail")
         time.sleep(params.sleep)
         return {"y": params.x * 10 + seed + params.offset}
-'''
+"""
 
 N_X, N_SEEDS = 6, 2
 TOTAL = N_X * N_SEEDS
@@ -82,14 +82,16 @@ def nap(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
 
     def write(workers: int = 2, **params: object) -> Path:
         path = tmp_path / "nap.yaml"
-        path.write_text(textwrap.dedent(f"""
+        path.write_text(
+            textwrap.dedent(f"""
             experiment: nap
             params: {json.dumps(params)}
             grid:
               x: {list(range(N_X))}
             seeds: {N_SEEDS}
             workers: {workers}
-            """))
+            """)
+        )
         return path
 
     yield write
@@ -161,7 +163,8 @@ def test_kill_9_at_random_points_then_resume_equals_an_uninterrupted_sweep(nap, 
 
 
 def test_a_full_disk_mid_sweep_keeps_the_log_valid_and_a_resume_completes_it(
-        nap, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
+    nap, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
     exp = nap(workers=1, sleep=0.0)
     out = tmp_path / "out"
     real_write = os.write
@@ -212,8 +215,9 @@ def test_a_file_named_by_the_params_is_part_of_them(nap, tmp_path: Path) -> None
     assert len(read_jsonl(out / "trials.jsonl")) == 2 * TOTAL
 
 
-def test_failed_trials_run_again_only_with_retry_failed(nap, tmp_path: Path, capsys: pytest.CaptureFixture,
-                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+def test_failed_trials_run_again_only_with_retry_failed(
+    nap, tmp_path: Path, capsys: pytest.CaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
     exp = nap(workers=1, sleep=0.0)
     out = tmp_path / "out"
     monkeypatch.setenv("NAP_FAIL", "1")
@@ -239,20 +243,29 @@ DAMAGE = {
 @pytest.mark.parametrize("damage", list(DAMAGE))
 def test_a_damaged_convex_pieces_cache_is_rebuilt(damage: str, tmp_path: Path) -> None:
     from asmteach.core import convex_pieces
+    from asmteach.core.convex_pieces import route
     from asmteach.core.models import PartSpec
     from asmteach.core.parts import build_part
 
-    part = build_part(PartSpec.model_validate({"name": "blk", "solid": {"add": [
-        {"shape": "box", "size": [0.04, 0.03, 0.02]}], "subtract": [
-        {"shape": "box", "size": [0.02, 0.04, 0.01], "pose": {"xyz": [0, 0, 0.01]}}]}}))
-    convex_pieces._MEMO.clear()
+    part = build_part(
+        PartSpec.model_validate(
+            {
+                "name": "blk",
+                "solid": {
+                    "add": [{"shape": "box", "size": [0.04, 0.03, 0.02]}],
+                    "subtract": [{"shape": "box", "size": [0.02, 0.04, 0.01], "pose": {"xyz": [0, 0, 0.01]}}],
+                },
+            }
+        )
+    )
+    route._MEMO.clear()
     first = convex_pieces.decompose(part, cache_dir=tmp_path)
     (path,) = tmp_path.glob("*.npz")
     path.write_bytes(DAMAGE[damage](path.read_bytes()))
-    convex_pieces._MEMO.clear()
+    route._MEMO.clear()
     again = convex_pieces.decompose(part, cache_dir=tmp_path)
     assert not again.cached and len(again.pieces) == len(first.pieces)
-    convex_pieces._MEMO.clear()
+    route._MEMO.clear()
     assert convex_pieces.decompose(part, cache_dir=tmp_path).cached  # the rebuilt file reads back
 
 
@@ -264,9 +277,16 @@ def test_a_damaged_view_database_is_rebuilt(damage: str, tmp_path: Path, monkeyp
 
     def tiny(mesh, v, d, c, key):  # a real database, small: building the 42 views is not what is tested
         built.append(key)
-        return views.ViewDatabase(key=key, T_acam_part=np.tile(np.eye(4), (2, 1, 1)), centroids=np.zeros((2, 3)),
-                                  crh=np.zeros((2, 90)), hists=np.ones((3, 308)), region_view=np.array([0, 1, 1]),
-                                  region_centroids=np.zeros((3, 3)), view_dirs=np.eye(3)[:2])
+        return views.ViewDatabase(
+            key=key,
+            T_acam_part=np.tile(np.eye(4), (2, 1, 1)),
+            centroids=np.zeros((2, 3)),
+            crh=np.zeros((2, 90)),
+            hists=np.ones((3, 308)),
+            region_view=np.array([0, 1, 1]),
+            region_centroids=np.zeros((3, 3)),
+            view_dirs=np.eye(3)[:2],
+        )
 
     monkeypatch.setattr(views, "build_views", tiny)
     settings = views.ViewSettings(cache_dir=str(tmp_path))
@@ -287,8 +307,9 @@ def test_a_damaged_grasp_cache_is_planned_again(damage: str, tmp_path: Path, mon
     from asmteach.plugins.planners.grasps.planner import AntipodalGraspPlanner
     from asmteach.plugins.robots.nextage.hand import nextage_hand
 
-    part = build_part(PartSpec.model_validate({"name": "blk", "solid": {"add": [
-        {"shape": "box", "size": [0.04, 0.03, 0.02]}]}}))
+    part = build_part(
+        PartSpec.model_validate({"name": "blk", "solid": {"add": [{"shape": "box", "size": [0.04, 0.03, 0.02]}]}})
+    )
     planner = AntipodalGraspPlanner({"cache_dir": str(tmp_path)})
     calls = []
     grasp = Grasp(id=0, p0=[0, -0.015, 0], p1=[0, 0.015, 0], R=np.eye(3), width=0.03, score=1.0)
@@ -306,7 +327,7 @@ def test_a_damaged_grasp_cache_is_planned_again(damage: str, tmp_path: Path, mon
     assert planner.plan(part, hand)[0].width == pytest.approx(0.03) and len(calls) == 2  # read back
 
 
-WATCHED = '''
+WATCHED = """
 import os, sys, time, multiprocessing as mp
 from asmteach.core.sweep import executors
 
@@ -321,7 +342,7 @@ if __name__ == "__main__":
     p = mp.Process(target=worker, args=(os.getpid(), sys.argv[1]))
     p.start()
     time.sleep(60)
-'''
+"""
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
