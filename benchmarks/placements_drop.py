@@ -42,8 +42,8 @@ import trimesh
 
 from asmteach.core.corpus import part_corpus, write_cad_stl
 from asmteach.core.parts import PartSpec, build_part
+from asmteach.core.rests.placements import plan_placements
 from asmteach.plugins.planners.placements.drop_test import down_normal, drop_test
-from asmteach.plugins.planners.placements.planner import plan_placements
 
 OUT = Path(__file__).resolve().parent / "out"
 COLUMNS = ["part", "family", "reported", "rests", "matched", "missed", "fragile", "below_margin", "spurious", "rolled",

@@ -34,7 +34,7 @@ def peg_in_hole_plan() -> Iterator[PlannedPegInHole]:
     from asmteach.core.interfaces import AssemblyProblem
     from asmteach.core.models import TablePlane
     from asmteach.core.parts import build_part, load_structure
-    from asmteach.plugins.planners.placements.planner import compute_placements
+    from asmteach.core.rests.placements import compute_placements
 
     task = load_structure("configs/parts/set1/peg_in_hole.yaml")
     a, b = build_part(task.part_a), build_part(task.part_b)

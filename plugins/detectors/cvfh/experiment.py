@@ -82,7 +82,7 @@ def _load_part(path: str, which: str) -> PartModel:
 
 @lru_cache(maxsize=16)
 def _placements(path: str, which: str) -> tuple[Placement, ...]:
-    from asmteach.plugins.planners.placements.planner import compute_placements
+    from asmteach.core.rests.placements import compute_placements
 
     return tuple(compute_placements(_load_part(path, which)))
 

@@ -4,7 +4,7 @@ Two sources of hypotheses besides CVFH view matching, both built on the
 paper's premise that a part lies at rest on the table:
 
 * **Resting hypotheses.** A part at rest on the table takes one of its
-  stable poses (trimesh's ``compute_stable_poses``), turned about the table
+  stable poses (:func:`stable_rests`), turned about the table
   normal and moved on the table: three unknowns instead of six. Each stable
   pose is tried at evenly spaced yaws, placed so the centroid of the model
   surface the camera would see falls on the observed cluster's centroid (in
@@ -39,6 +39,7 @@ import asmteach.core  # noqa: F401  (loads libusb before open3d)
 from asmteach.core import geometry
 from asmteach.core.models import TablePlane
 from asmteach.core.perception.registration import ModelCloud, ray_depths
+from asmteach.core.rests.placements import plan_placements, resting_poses
 from asmteach.core.symmetry import part_symmetries
 
 import open3d as o3d  # isort: skip
@@ -55,15 +56,13 @@ __all__ = [
 
 
 def stable_rests(mesh: trimesh.Trimesh, com: np.ndarray, max_poses: int) -> np.ndarray:
-    """``(k, 4, 4)`` part poses resting on the plane z = 0, most likely first, footprint centred on x = y = 0."""
-    T, p = trimesh.poses.compute_stable_poses(mesh, center_mass=np.asarray(com, float))
-    T = np.asarray(T, float)[np.argsort(-np.asarray(p, float))][:max_poses]
-    out = []
-    for Ti in T:
-        v = geometry.transform_points(Ti, np.asarray(mesh.vertices))
-        c = 0.5 * (v.min(axis=0) + v.max(axis=0))
-        out.append(geometry.compose(geometry.from_rotation(np.eye(3), [-c[0], -c[1], -v[:, 2].min()]), Ti))
-    return np.asarray(out).reshape(-1, 4, 4)
+    """``(k, 4, 4)`` part poses resting on the plane z = 0, most likely first, footprint centred on x = y = 0.
+
+    The rests are the part's placements (:mod:`asmteach.core.rests`, the ones
+    the planners and the corrector use); their symmetry is not needed here.
+    """
+    placements = plan_placements(mesh, np.asarray(com, float), symmetry=False).placements
+    return resting_poses(placements, np.asarray(mesh.vertices))[0][:max_poses]
 
 
 def hull_twins(mesh: trimesh.Trimesh, com: np.ndarray, own: list[np.ndarray] | None = None) -> list[np.ndarray]:

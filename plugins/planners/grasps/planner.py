@@ -79,6 +79,7 @@ from asmteach.core.interfaces import GraspPlanner, PartModel
 from asmteach.core.io import cache_root, write_json
 from asmteach.core.models import Grasp, HandSpec, StrictModel
 from asmteach.core.parts import mesh_hash
+from asmteach.core.rests.placements import compute_placements
 from asmteach.plugins.planners.grasps.antipodal import antipodal_angles, friction_half_angle
 from asmteach.plugins.planners.grasps.checks import (
     check_graspable_width,
@@ -88,7 +89,6 @@ from asmteach.plugins.planners.grasps.checks import (
 )
 from asmteach.plugins.planners.grasps.contact import PadStrip, load_ratio, pad_contacts, pad_strip
 from asmteach.plugins.planners.grasps.sampling import ContactPairs, Raycaster, find_opposite_contacts, sample_surface
-from asmteach.plugins.planners.placements.planner import compute_placements
 
 __all__ = ["AntipodalGraspPlanner", "AntipodalSettings", "default_cache_dir", "resting_directions",
            "sphere_directions", "table_gaps"]

@@ -2,10 +2,9 @@
 
 Modules, one job each:
 
-* :mod:`.facets` - convex hull and clustering of coplanar hull faces into support facets;
-* :mod:`.stability` - centre-of-mass margin test, toppling graph and probabilities;
-* :mod:`.symmetry` - rotational symmetry of a placement about the table normal;
-* :mod:`.planner` - :func:`compute_placements` (part -> list of :class:`~asmteach.core.models.Placement`);
+* the placements themselves are computed in core (:mod:`asmteach.core.rests`: hull facets,
+  stability, probabilities, symmetry), shared with the grasp and regrasp planners and the detectors;
+* :mod:`.drop_test` - PyBullet drops and tilted releases that check the stability rule;
 * :mod:`.table` - table frame from a :class:`~asmteach.core.models.TablePlane`, plane fitting;
 * :mod:`.planar_icp` - x, y, yaw refinement of a model against an observed cloud;
 * :mod:`.corrector` - the ``stable_placements`` corrector (paper, Alg. "Noise correction");

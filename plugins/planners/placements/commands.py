@@ -22,8 +22,8 @@ from asmteach.core.hooks import hookimpl
 from asmteach.core.interfaces import PartModel
 from asmteach.core.io import check_out_file, write_json
 from asmteach.core.parts import load_parts as load_library_parts
+from asmteach.core.rests.placements import PlacementResult, placement_result
 from asmteach.plugins.planners.placements.contact_sheet import render_contact_sheet
-from asmteach.plugins.planners.placements.planner import PlacementResult, placement_result
 
 __all__ = ["asmteach_add_commands", "load_parts"]
 

@@ -17,8 +17,8 @@ import numpy as np
 
 from asmteach.core.hooks import hookimpl
 from asmteach.core.interfaces import PartModel
+from asmteach.core.rests.placements import plan_placements
 from asmteach.plugins.planners.placements.drop_test import down_normal, drop_test
-from asmteach.plugins.planners.placements.planner import plan_placements
 
 __all__ = ["asmteach_measure_part"]
 

@@ -37,8 +37,8 @@ from asmteach.core import geometry
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Corrector, PartModel
 from asmteach.core.models import Correction, StrictModel, TablePlane, Vec3
+from asmteach.core.rests.placements import PlacementResult, placement_result
 from asmteach.plugins.planners.placements.planar_icp import ModelSurface, planar_icp, planar_transform
-from asmteach.plugins.planners.placements.planner import PlacementResult, placement_result
 from asmteach.plugins.planners.placements.table import fit_table_plane, points_above, table_frame
 
 __all__ = ["StablePlacementCorrector", "nearest_placement"]

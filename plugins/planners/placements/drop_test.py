@@ -50,7 +50,7 @@ import pybullet as pb
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from asmteach.plugins.planners.placements.facets import convex_hull, is_closed
+from asmteach.core.rests.facets import convex_hull, is_closed
 
 __all__ = ["DropReport", "down_normal", "drop_test"]
 

@@ -32,9 +32,9 @@ from asmteach.core.interfaces import PartModel
 from asmteach.core.io import write_text
 from asmteach.core.models import PartSpec, StrictModel
 from asmteach.core.parts import build_part, load_structure
+from asmteach.core.rests.placements import plan_placements
+from asmteach.core.rests.stability import evaluate_direction
 from asmteach.core.sweep import Experiment, to_csv, to_markdown
-from asmteach.plugins.planners.placements.planner import plan_placements
-from asmteach.plugins.planners.placements.stability import evaluate_direction
 
 __all__ = ["PlacementsVsTrimesh", "compare_mesh"]
 

@@ -31,7 +31,7 @@ from asmteach.core.interfaces import (
     Robot,
 )
 from asmteach.core.models import Plan
-from asmteach.plugins.planners.placements.planner import compute_placements
+from asmteach.core.rests.placements import compute_placements
 from asmteach.plugins.planners.regrasp.assembly import (
     AssemblySettings,
     PlaceGoal,

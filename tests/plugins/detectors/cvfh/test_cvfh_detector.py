@@ -33,7 +33,7 @@ def l_block() -> PartModel:
 
 @pytest.fixture(scope="module")
 def placements(l_block: PartModel) -> list[Placement]:
-    from asmteach.plugins.planners.placements.planner import compute_placements
+    from asmteach.core.rests.placements import compute_placements
 
     return compute_placements(l_block)
 

@@ -9,8 +9,8 @@ from asmteach.core import geometry
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Corrector
 from asmteach.core.models import TablePlane
+from asmteach.core.rests.placements import compute_placements
 from asmteach.plugins.planners.placements.corrector import StablePlacementCorrector, nearest_placement
-from asmteach.plugins.planners.placements.planner import compute_placements
 
 H = 0.70  # table height, metres
 CAMERA = np.array([0.0, -0.35, H + 0.45])

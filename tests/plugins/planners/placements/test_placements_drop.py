@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import trimesh
 
+from asmteach.core.rests.facets import MERGE_DIST_REL, convex_hull, support_facets
+from asmteach.core.rests.placements import PlacementResult, plan_placements
+from asmteach.core.rests.stability import evaluate_direction
 from asmteach.plugins.planners.placements.drop_test import down_normal, drop_test
-from asmteach.plugins.planners.placements.facets import MERGE_DIST_REL, convex_hull, support_facets
-from asmteach.plugins.planners.placements.planner import PlacementResult, plan_placements
-from asmteach.plugins.planners.placements.stability import evaluate_direction
 
 
 def _normals(res: PlacementResult) -> np.ndarray:

@@ -10,9 +10,9 @@ from asmteach.core import geometry, registry
 from asmteach.core.interfaces import AssemblyProblem, Robot
 from asmteach.core.models import TablePlane
 from asmteach.core.parts import build_part, load_structure
+from asmteach.core.rests.placements import compute_placements
 from asmteach.core.scene import SceneSettings, random_start_poses
 from asmteach.core.trajectory.interpolate import densify
-from asmteach.plugins.planners.placements.planner import compute_placements
 from asmteach.plugins.planners.regrasp.assembly import AssemblySettings, placement_slots
 from asmteach.plugins.planners.regrasp.goals import choose_assembly_goal
 

@@ -22,7 +22,7 @@ from asmteach.core.hand_geometry import MeshCollider
 from asmteach.core.interfaces import IKResult, MotionResult, Obstacle, PartModel, Robot
 from asmteach.core.models import Grasp, HandSpec, PartSpec, Primitive, SolidSpec
 from asmteach.core.parts import build_part
-from asmteach.plugins.planners.placements.planner import compute_placements
+from asmteach.core.rests.placements import compute_placements
 from asmteach.plugins.planners.regrasp.assembly import (
     AssemblySettings,
     PlaceGoal,

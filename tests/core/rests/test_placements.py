@@ -9,17 +9,19 @@ import numpy as np
 import pytest
 import trimesh
 
+from asmteach.core import geometry
 from asmteach.core.errors import UserError
 from asmteach.core.parts import build_part, load_structure
-from asmteach.plugins.planners.placements.planner import (
+from asmteach.core.rests.placements import (
     canonical_rotation,
     compute_placements,
     placement_result,
     plan_placements,
+    resting_poses,
 )
-from asmteach.plugins.planners.placements.stability import evaluate_direction
+from asmteach.core.rests.stability import evaluate_direction
 
-REPO = Path(__file__).resolve().parents[4]
+REPO = Path(__file__).resolve().parents[3]
 
 
 def _down_normal(T: np.ndarray) -> np.ndarray:
@@ -95,6 +97,13 @@ def test_library_parts_agree_with_trimesh(structure: Path) -> None:
                 assert np.max(ours_n @ n) > np.cos(np.radians(1.0)), f"{spec.name}: trimesh pose p={p:.3f} missed"
 
 
+@pytest.fixture(scope="module")
+def l_block():
+    """Asymmetric L-shaped block (set 1, l_corner part A)."""
+    path = REPO / "configs/parts/set1/l_corner.yaml"
+    return build_part(load_structure(path).part_a, path.parent)
+
+
 def test_cache_serves_the_same_result(l_block) -> None:
     a = placement_result(l_block)
     b = placement_result(l_block)
@@ -125,3 +134,38 @@ def test_open_mesh_uses_hull_and_warns_once(caplog: pytest.LogCaptureFixture) ->
     assert sum("not watertight" in r.getMessage() for r in caplog.records) == 1
     assert len(a.placements) == len(b.placements) == 6
     assert "convex hull used" in a.notes[0]
+
+
+def test_resting_poses_centre_the_footprint_and_weigh_the_likely_rests() -> None:
+    """A 10 x 20 x 40 mm box rests on its six faces; the flat ones are likelier, the probabilities sum to 1."""
+    box = trimesh.creation.box(extents=[0.01, 0.02, 0.04])
+    box.apply_translation([0.3, -0.2, 0.1])  # the part frame need not be centred
+    placements = plan_placements(box, symmetry=False).placements
+    Ts, p = resting_poses(placements, box.vertices)
+    assert Ts.shape == (len(placements), 4, 4) == (6, 4, 4)
+    assert p.sum() == pytest.approx(1.0) and np.all(np.diff(p) <= 1e-12)
+    for T in Ts:
+        v = geometry.transform_points(T, box.vertices)
+        assert v[:, 2].min() == pytest.approx(0.0, abs=1e-12)
+        assert np.allclose(0.5 * (v.min(axis=0) + v.max(axis=0))[:2], 0.0, atol=1e-12)
+    # lying flat (on a 20 x 40 face, 5 mm up) comes first; standing on a 10 x 20 end is least likely
+    first = geometry.transform_points(Ts[0], box.vertices)
+    assert first[:, 2].max() == pytest.approx(0.01)
+    assert geometry.transform_points(Ts[-1], box.vertices)[:, 2].max() == pytest.approx(0.04)
+    few, q = resting_poses(placements, box.vertices, min_probability=0.2)
+    assert len(few) == int(np.sum(p >= 0.2)) and q.sum() == pytest.approx(1.0)
+    assert len(resting_poses(placements, box.vertices, min_probability=1.0)[0]) == 1  # the likeliest always kept
+    empty, none = resting_poses([], box.vertices)
+    assert empty.shape == (0, 4, 4) and none.shape == (0,)
+
+
+def test_resting_poses_are_trimesh_stable_poses_with_trimesh_yaw() -> None:
+    """The random start scenes still draw trimesh's rests (see core.scene): the two must stay the same poses."""
+    box = trimesh.creation.box(extents=[0.01, 0.02, 0.04])
+    Ts, _ = resting_poses(plan_placements(box, symmetry=False).placements, box.vertices)
+    T_tm, _ = trimesh.poses.compute_stable_poses(box)
+    for T in T_tm:
+        v = geometry.transform_points(T, box.vertices)
+        c = 0.5 * (v.min(axis=0) + v.max(axis=0))
+        T = geometry.compose(geometry.from_rotation(np.eye(3), [-c[0], -c[1], -v[:, 2].min()]), T)
+        assert min(np.abs(T - ours).max() for ours in Ts) < 1e-12

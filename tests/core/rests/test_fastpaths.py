@@ -9,9 +9,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from asmteach.core.models import Placement
-from asmteach.core.symmetry import SymmetryFinder, _within
-from asmteach.plugins.planners.placements.facets import _components, convex_hull, cross, is_closed
-from asmteach.plugins.planners.placements.planner import plan_placements
+from asmteach.core.rests.facets import _components, convex_hull, cross, is_closed
+from asmteach.core.rests.placements import plan_placements
+from asmteach.core.symmetry.finder import SymmetryFinder, _within
 
 
 def _blind_hole_block(extents: tuple[float, float, float], radius: float, depth: float, axis: int) -> trimesh.Trimesh:

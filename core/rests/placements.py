@@ -1,4 +1,11 @@
-"""Stable placements of a part: :func:`compute_placements`.
+"""Stable placements of a part: :func:`compute_placements`, the one stable-rest computation.
+
+The users of resting poses take them from here: the ``stable_placements``
+corrector, the grasp planner (grasps spread over the resting poses), the
+regrasp planner (intermediate placements), the CVFH detector's resting
+hypotheses (:func:`resting_poses`, which also gives each rest's landing
+probability, scaled to be drawn from). The random start scenes
+(:mod:`asmteach.core.scene`) are the one exception, kept on purpose: see there.
 
 Pipeline (paper, section "Noise correction using geometric constraints"):
 convex hull -> support facets (hull faces merged within an angular and a
@@ -9,8 +16,8 @@ tessellated curve it counts the facets that roll back: :mod:`.stability`) -> one
 (facet on the table, canonical yaw), support polygon, landing probability and
 rotational symmetry about the table normal. A merged facet is flat within the
 tolerances, so the part rests on the plane of its mean normal. The rule is
-checked against PyBullet drops by :mod:`.drop_test` (and over the part corpus
-by ``benchmarks/placements_drop.py``).
+checked against PyBullet drops by the placements plugin's ``drop_test`` (and
+over the part corpus by ``benchmarks/placements_drop.py``).
 
 A rest with nothing to topple over (its basin is the whole sphere of down
 directions) is reported with margin :data:`NO_TOPPLE_MARGIN`.
@@ -27,6 +34,7 @@ import logging
 import math
 import time
 from collections import OrderedDict
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -38,8 +46,7 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Placement
 from asmteach.core.parts import mesh_hash
-from asmteach.core.symmetry import SymmetryFinder, symmetry_yaws
-from asmteach.plugins.planners.placements.facets import (
+from asmteach.core.rests.facets import (
     MERGE_DIST_REL,
     Hull,
     SupportFacets,
@@ -47,7 +54,8 @@ from asmteach.plugins.planners.placements.facets import (
     is_closed,
     support_facets,
 )
-from asmteach.plugins.planners.placements.stability import FacetStability, facet_stability
+from asmteach.core.rests.stability import FacetStability, facet_stability
+from asmteach.core.symmetry import SymmetryFinder, symmetry_yaws
 
 __all__ = [
     "NO_TOPPLE_MARGIN",
@@ -57,6 +65,7 @@ __all__ = [
     "clear_cache",
     "compute_placements",
     "plan_placements",
+    "resting_poses",
 ]
 
 log = logging.getLogger(__name__)
@@ -293,3 +302,49 @@ def compute_placements(part: PartModel, **kwargs: Any) -> list[Placement]:
 def clear_cache() -> None:
     """Forget every cached placement set."""
     _cache.clear()
+
+
+def _level_x_rotation(up: np.ndarray) -> np.ndarray:
+    """``(3, 3)`` rotation taking the part-frame ``up`` (unit) to +z, its rows ``x, y, up`` with
+    ``x = (-up_y, up_x, 0)`` normalised (``(1, 0, 0)`` when ``up`` is along z).
+
+    This yaw is the one ``trimesh.poses.compute_stable_poses`` gives (its rests
+    match these to 1e-16 on the set-1 and set-2 parts), so hypotheses and
+    scenes built on it before stay where they were.
+    """
+    z = np.asarray(up, dtype=float) / np.linalg.norm(up)
+    x = np.array([-z[1], z[0], 0.0])
+    n = float(np.linalg.norm(x))
+    x = np.array([1.0, 0.0, 0.0]) if n == 0.0 else x / n
+    y = np.cross(z, x)
+    return np.array([x, y / np.linalg.norm(y), z])
+
+
+def resting_poses(
+    placements: Sequence[Placement], vertices: np.ndarray, min_probability: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(T (k, 4, 4), probabilities (k,))``: the placements as part poses resting on the plane z = 0.
+
+    Each ``T`` maps part-frame points (metres) to the resting frame with the
+    footprint (the bounding box of ``vertices`` in x and y) centred on
+    ``x = y = 0`` and the yaw of :func:`_level_x_rotation`, most likely first. Only placements at least
+    ``min_probability`` likely are kept (the most likely one always is), and
+    their landing probabilities are scaled to sum to 1 so that a random start
+    pose can be drawn from them (refused facets hold the part too, so the
+    reported probabilities alone may sum to less).
+    """
+    if not placements:
+        return np.zeros((0, 4, 4)), np.zeros(0)
+    p = np.array([pl.probability for pl in placements], dtype=float)
+    order = np.argsort(-p, kind="stable")
+    keep = order[p[order] >= min(min_probability, float(p.max()))]
+    v = np.asarray(vertices, dtype=float)
+    out = []
+    for i in keep:
+        T = geometry.from_rotation(_level_x_rotation(np.asarray(placements[i].T_table_part, dtype=float)[2, :3]))
+        w = geometry.transform_points(T, v)
+        c = 0.5 * (w.min(axis=0) + w.max(axis=0))
+        out.append(geometry.compose(geometry.from_rotation(np.eye(3), [-c[0], -c[1], -w[:, 2].min()]), T))
+    prob = p[keep]
+    prob = prob / prob.sum() if prob.sum() > 0.0 else np.full(len(keep), 1.0 / len(keep))
+    return np.asarray(out).reshape(-1, 4, 4), prob

@@ -44,7 +44,7 @@ infinite margin. Why 15 degrees: a regular ``n``-gon prism has
 i.e. when its dihedral angles ``2 pi / n`` are below 11.6 degrees; from 12
 sides (30 degrees) up the sides pass on ``d / h`` alone. A tall post
 standing on its end is refused as before. PyBullet drops and tilted
-releases (:mod:`.drop_test`) are the judge: released tilted by less than
+releases (the placements plugin's ``drop_test``) are the judge: released tilted by less than
 ``atan(min_margin)`` a reported rest keeps the part (or lets a cylinder roll
 to a neighbouring strip), and the rests the drops find on refused facets let
 it go when tilted by more.
@@ -67,7 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from asmteach.plugins.planners.placements.facets import SupportFacets, _components, cross
+from asmteach.core.rests.facets import SupportFacets, _components, cross
 
 # Relative COM-height tolerance of a neutral roll (a cylinder's strips are level to rounding).
 _LEVEL_REL = 1e-4
