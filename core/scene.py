@@ -24,21 +24,12 @@ from __future__ import annotations
 
 import numpy as np
 import trimesh
-from pydantic import Field
 
+from asmteach.core.config import SceneSettings
 from asmteach.core.geometry import compose, from_rotation, rot_z
 from asmteach.core.interfaces import PartModel
-from asmteach.core.models import StrictModel
 
-__all__ = ["SceneSettings", "random_start_poses", "stable_poses"]
-
-
-class SceneSettings(StrictModel):
-    """Where parts may start (world x, |y| ranges in metres)."""
-
-    x_range: tuple[float, float] = Field((0.30, 0.44), description="world x of a part's centre")
-    y_range: tuple[float, float] = Field((0.14, 0.28), description="|world y| of a part's centre")
-    min_probability: float = Field(0.05, ge=0.0, le=1.0, description="least likely resting pose drawn")
+__all__ = ["random_start_poses", "stable_poses"]
 
 
 def stable_poses(part: PartModel, min_probability: float) -> tuple[np.ndarray, np.ndarray]:

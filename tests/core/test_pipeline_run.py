@@ -8,8 +8,9 @@ import pytest
 import yaml
 
 from asmteach.core.cli import main
+from asmteach.core.config import SceneSettings
 from asmteach.core.parts import build_part, load_structure
-from asmteach.core.scene import SceneSettings, random_start_poses
+from asmteach.core.scene import random_start_poses
 
 ROOT = Path(__file__).resolve().parents[2]
 STRUCTURE = ROOT / "configs/parts/set1/peg_in_hole.yaml"

@@ -21,10 +21,11 @@ import numpy as np
 from pydantic import Field
 
 from asmteach.core import registry
+from asmteach.core.config import SceneSettings
 from asmteach.core.interfaces import AssemblyProblem
 from asmteach.core.models import StrictModel, TablePlane
 from asmteach.core.parts import build_part, load_structure
-from asmteach.core.scene import SceneSettings, random_start_poses
+from asmteach.core.scene import random_start_poses
 from asmteach.core.sweep import Experiment
 
 __all__ = ["AssemblyPlanningExperiment"]

@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 
 from asmteach.core import geometry, registry
+from asmteach.core.config import SceneSettings
 from asmteach.core.interfaces import AssemblyProblem, Robot
 from asmteach.core.models import TablePlane
 from asmteach.core.parts import build_part, load_structure
 from asmteach.core.rests.placements import compute_placements
-from asmteach.core.scene import SceneSettings, random_start_poses
+from asmteach.core.scene import random_start_poses
 from asmteach.core.trajectory.interpolate import densify
 from asmteach.plugins.planners.regrasp.assembly import AssemblySettings, placement_slots
 from asmteach.plugins.planners.regrasp.goals import choose_assembly_goal
