@@ -66,9 +66,13 @@ def ik_many(
     dist = np.linalg.norm(T[todo, :3, 3] - solver.shoulder, axis=1)
     far = dist > c.reach * 1.001
     for i, d in zip(todo[far], dist[far], strict=True):
-        results[i] = IKResult(False, None, residual_pos=float(d - c.reach), residual_rot=float("nan"),
-                              reason=f"target outside the workspace: {d:.3f} m from the arm's first joint, "
-                                     f"reach at most {c.reach:.3f} m")
+        results[i] = IKResult(
+            False,
+            None,
+            residual_pos=float(d - c.reach),
+            residual_rot=float("nan"),
+            reason=f"target outside the workspace: {d:.3f} m from the arm's first joint, reach at most {c.reach:.3f} m",
+        )
     todo = todo[~far]
     if todo.size:
         flips = (False, True) if (kin.settings.try_flipped if flipped is None else flipped) else (False,)
@@ -88,12 +92,18 @@ def ik_many(
                 arr[left[better]] = new[better]
         for r, i in enumerate(todo):
             if ok[r]:
-                results[i] = IKResult(True, q[r], residual_pos=float(ep[r]), residual_rot=float(er[r]),
-                                      flipped=bool(flips[flip[r]]))
+                results[i] = IKResult(
+                    True, q[r], residual_pos=float(ep[r]), residual_rot=float(er[r]), flipped=bool(flips[flip[r]])
+                )
             else:
-                results[i] = IKResult(False, None, residual_pos=float(ep[r]), residual_rot=float(er[r]),
-                                      reason=f"no solution within the joint limits after {s.batch_starts} starts "
-                                             f"(best residual {ep[r] * 1000:.2f} mm, {math.degrees(er[r]):.2f} deg)")
+                results[i] = IKResult(
+                    False,
+                    None,
+                    residual_pos=float(ep[r]),
+                    residual_rot=float(er[r]),
+                    reason=f"no solution within the joint limits after {s.batch_starts} starts "
+                    f"(best residual {ep[r] * 1000:.2f} mm, {math.degrees(er[r]):.2f} deg)",
+                )
     return [r for r in results if r is not None]
 
 
@@ -228,7 +238,6 @@ _STALL = 8
 """Iterations without a 10 % cut of the error before a start is abandoned."""
 
 
-
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``a x b`` along the last axis (length 3), without ``np.cross``'s axis juggling."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
@@ -254,8 +263,12 @@ def _rotvec(R: np.ndarray) -> np.ndarray:
         r = R[i]
         if c == 0:
             w = 0.5 * np.sqrt(1.0 + tr[i])
-            q[i] = np.stack([r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1],
-                             4.0 * w * w], axis=1) / (4.0 * w)[:, None]
+            q[i] = (
+                np.stack(
+                    [r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1], 4.0 * w * w], axis=1
+                )
+                / (4.0 * w)[:, None]
+            )
         else:
             a = c - 1
             b_, c_ = (a + 1) % 3, (a + 2) % 3

@@ -68,8 +68,18 @@ def _bvh(mesh: trimesh.Trimesh) -> fcl.BVHModel:
 
 def _mesh_geom(name: str, link: str, joint: int, placement: np.ndarray, mesh: trimesh.Trimesh) -> _Geom:
     obb = mesh.bounding_box_oriented
-    return _Geom(name, link, joint, placement, np.asarray(obb.primitive.transform, dtype=float),
-                 0.5 * np.asarray(obb.primitive.extents, dtype=float), False, _bvh(mesh), kind="mesh", mesh=mesh)
+    return _Geom(
+        name,
+        link,
+        joint,
+        placement,
+        np.asarray(obb.primitive.transform, dtype=float),
+        0.5 * np.asarray(obb.primitive.extents, dtype=float),
+        False,
+        _bvh(mesh),
+        kind="mesh",
+        mesh=mesh,
+    )
 
 
 def _box_geom(name: str, link: str, joint: int, placement: np.ndarray, size: np.ndarray) -> _Geom:
@@ -77,8 +87,9 @@ def _box_geom(name: str, link: str, joint: int, placement: np.ndarray, size: np.
     return _Geom(name, link, joint, placement, np.eye(4), 0.5 * size, True, fcl.Box(*size))
 
 
-def obb_overlap(cA: np.ndarray, RA: np.ndarray, hA: np.ndarray, cB: np.ndarray, RB: np.ndarray,
-                hB: np.ndarray) -> np.ndarray:
+def obb_overlap(
+    cA: np.ndarray, RA: np.ndarray, hA: np.ndarray, cB: np.ndarray, RB: np.ndarray, hB: np.ndarray
+) -> np.ndarray:
     """Separating-axis test of oriented boxes, vectorised: True where boxes ``A[k]`` and ``B[k]`` overlap.
 
     ``c*`` are ``(m, 3)`` centres, ``R*`` ``(m, 3, 3)`` rotations (columns: box axes in
@@ -95,8 +106,12 @@ def obb_overlap(cA: np.ndarray, RA: np.ndarray, hA: np.ndarray, cB: np.ndarray, 
         for j in range(3):
             j1, j2 = (j + 1) % 3, (j + 2) % 3
             lhs = np.abs(t[:, i2] * R[:, i1, j] - t[:, i1] * R[:, i2, j])
-            rhs = (hA[:, i1] * aR[:, i2, j] + hA[:, i2] * aR[:, i1, j]
-                   + hB[:, j1] * aR[:, i, j2] + hB[:, j2] * aR[:, i, j1])
+            rhs = (
+                hA[:, i1] * aR[:, i2, j]
+                + hA[:, i2] * aR[:, i1, j]
+                + hB[:, j1] * aR[:, i, j2]
+                + hB[:, j2] * aR[:, i, j1]
+            )
             sep |= lhs > rhs
     return ~sep
 
@@ -145,12 +160,22 @@ class CollisionChecker:
                 geom = _box_geom(name, link, go.parentJoint, P, 2.0 * np.asarray(g.halfSide))
             elif kind == "Cylinder":
                 r, h = float(g.radius), 2.0 * float(g.halfLength)
-                geom = _Geom(name, link, go.parentJoint, P, np.eye(4), np.array([r, r, 0.5 * h]), False,
-                             fcl.Cylinder(r, h), kind="cylinder")
+                geom = _Geom(
+                    name,
+                    link,
+                    go.parentJoint,
+                    P,
+                    np.eye(4),
+                    np.array([r, r, 0.5 * h]),
+                    False,
+                    fcl.Cylinder(r, h),
+                    kind="cylinder",
+                )
             elif kind == "Sphere":
                 r = float(g.radius)
-                geom = _Geom(name, link, go.parentJoint, P, np.eye(4), np.full(3, r), False, fcl.Sphere(r),
-                             kind="sphere")
+                geom = _Geom(
+                    name, link, go.parentJoint, P, np.eye(4), np.full(3, r), False, fcl.Sphere(r), kind="sphere"
+                )
             else:  # a mesh: load it with trimesh (pinocchio resolved the path) and scale it
                 path = resolve_mesh(go.meshPath, kin.urdf.parent)
                 mesh = trimesh.load(path, force="mesh")
@@ -160,8 +185,9 @@ class CollisionChecker:
             out.append(geom)
         return out
 
-    def set_table(self, center_xy: Sequence[float], size_xy: Sequence[float], height: float,
-                  thickness: float = 0.05) -> None:
+    def set_table(
+        self, center_xy: Sequence[float], size_xy: Sequence[float], height: float, thickness: float = 0.05
+    ) -> None:
         """The table as a box whose top face is at ``height`` (world z, metres)."""
         T = np.eye(4)
         T[:3, 3] = [center_xy[0], center_xy[1], height - 0.5 * thickness]
@@ -218,7 +244,7 @@ class CollisionChecker:
         pa: list[int] = []
         pb: list[int] = []
         for i, a in enumerate(moving):
-            for b in objs[i + 1:]:
+            for b in objs[i + 1 :]:
                 if a is held:
                     if b.link in hand or (b.joint == -1 and b.name in ignore):
                         continue
@@ -249,8 +275,9 @@ class CollisionChecker:
         return out
 
     # ------------------------------------------------------------ queries
-    def _hits(self, arm: str, qs: np.ndarray, ignore: Sequence[str], stop_early: bool = True) -> tuple[
-            list[_Geom], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _hits(
+        self, arm: str, qs: np.ndarray, ignore: Sequence[str], stop_early: bool = True
+    ) -> tuple[list[_Geom], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Contacts for ``n`` configurations: ``(objs, poses, config index, pair index, hit)``."""
         objs, A, B, exact = self._pair_set(arm, ignore)
         n = qs.shape[0]
@@ -282,8 +309,9 @@ class CollisionChecker:
             Wa = np.where(cyl[a][:, None, None], Wa @ Rz, Wa)
             Wb = np.where(cyl[b][:, None, None], Wb @ Rz, Wb)
             keep = np.ones(len(ci), dtype=bool)
-            keep[np.nonzero(sel)[0]] = obb_overlap(Wa[:, :3, 3], Wa[:, :3, :3], half[a], Wb[:, :3, 3], Wb[:, :3, :3],
-                                                   half[b])
+            keep[np.nonzero(sel)[0]] = obb_overlap(
+                Wa[:, :3, 3], Wa[:, :3, :3], half[a], Wb[:, :3, 3], Wb[:, :3, :3], half[b]
+            )
             ci, pi = ci[keep], pi[keep]
         hit = exact[pi].copy()
         done = np.zeros(n, dtype=bool)
@@ -346,8 +374,10 @@ class CollisionChecker:
         poses = self._poses(arm, qs, objs)
         W = poses @ np.stack([g.obb for g in objs])[None]  # OBB frames in the world, (n, objs, 4, 4)
         half = np.stack([g.half for g in objs])
-        lb = np.maximum(_obb_gap(W[:, mov], half[mov], W[:, world], half[world]),
-                        _obb_gap(W[:, world], half[world], W[:, mov], half[mov]).transpose(0, 2, 1))
+        lb = np.maximum(
+            _obb_gap(W[:, mov], half[mov], W[:, world], half[world]),
+            _obb_gap(W[:, world], half[world], W[:, mov], half[mov]).transpose(0, 2, 1),
+        )
         pair_m, pair_w = np.meshgrid(mov, world, indexing="ij")
         pair_m, pair_w = pair_m.ravel(), pair_w.ravel()
         lb = np.maximum(lb.reshape(qs.shape[0], -1), 0.0)

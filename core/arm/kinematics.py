@@ -55,8 +55,11 @@ class IKSettings(StrictModel):
     max_iters: int = Field(60, ge=1, description="iterations per start")
     max_starts: int = Field(40, ge=1, description="seed, home, then random starts")
     batch_starts: int = Field(
-        4, ge=1, description="starts per target when many targets are solved at once (random ones only for "
-        "targets that neither the seed nor the home reach)")
+        4,
+        ge=1,
+        description="starts per target when many targets are solved at once (random ones only for "
+        "targets that neither the seed nor the home reach)",
+    )
     damping: float = Field(1e-6, gt=0.0, description="DLS damping lambda^2 (m^2)")
     max_step: float = Field(0.4, gt=0.0, description="largest joint step per iteration, radians")
     try_flipped: bool = Field(True, description="for grasps, also try the TCP turned 180 deg about z")
@@ -129,8 +132,9 @@ class Kinematics:
         for jn in names[1:]:
             j = self.model.joints[self.model.getJointId(jn)]
             if j.nq != j.nv:
-                raise UserError(f"{self.urdf.name}: joint {jn!r} is continuous or multi-DOF; use a revolute joint "
-                                "with limits")
+                raise UserError(
+                    f"{self.urdf.name}: joint {jn!r} is continuous or multi-DOF; use a revolute joint with limits"
+                )
         self.q_full = np.clip(np.zeros(self.model.nq), self.model.lowerPositionLimit, self.model.upperPositionLimit)
         self.arms: dict[str, ArmChain] = {}
         for arm, (jnames, tcp) in arms.items():
@@ -148,8 +152,10 @@ class Kinematics:
             ids.append(m.getJointId(jn))
         for a, b in itertools.pairwise(ids):
             if a not in list(m.supports[b]):
-                raise UserError(f"{self.urdf.name}: arm {arm!r}: joint {m.names[a]!r} is not an ancestor of "
-                                f"{m.names[b]!r}; list the joints from the base to the tip")
+                raise UserError(
+                    f"{self.urdf.name}: arm {arm!r}: joint {m.names[a]!r} is not an ancestor of "
+                    f"{m.names[b]!r}; list the joints from the base to the tip"
+                )
         if not m.existFrame(tcp):
             frames = [f.name for f in m.frames]
             raise UserError(f"{self.urdf.name}: arm {arm!r}: no link or frame named {tcp!r}{_closest(tcp, frames)}")
@@ -201,8 +207,10 @@ class Kinematics:
         if np.any(bad):
             k = int(np.argwhere(bad)[0][-1])
             v = float(qa.reshape(-1, c.dof)[np.any(bad.reshape(-1, c.dof), axis=1)][0, k])
-            raise UserError(f"arm {arm!r}: joint {c.joint_names[k]} = {v:.6f} rad is outside its limits "
-                            f"[{c.lower[k]:.6f}, {c.upper[k]:.6f}]")
+            raise UserError(
+                f"arm {arm!r}: joint {c.joint_names[k]} = {v:.6f} rad is outside its limits "
+                f"[{c.lower[k]:.6f}, {c.upper[k]:.6f}]"
+            )
         return qa
 
     def set_arm(self, arm: str, q: np.ndarray) -> None:
@@ -300,9 +308,14 @@ class Kinematics:
         shoulder = self.data.oMi[c.joint_ids[0]].translation
         dist = float(np.linalg.norm(T_base[:3, 3] - shoulder))
         if dist > c.reach * 1.001:
-            return IKResult(False, None, residual_pos=dist - c.reach, residual_rot=float("nan"),
-                            reason=f"target outside the workspace: {dist:.3f} m from the arm's first joint, "
-                                   f"reach at most {c.reach:.3f} m")
+            return IKResult(
+                False,
+                None,
+                residual_pos=dist - c.reach,
+                residual_rot=float("nan"),
+                reason=f"target outside the workspace: {dist:.3f} m from the arm's first joint, "
+                f"reach at most {c.reach:.3f} m",
+            )
         oMdes = pin.SE3(T_base[:3, :3].copy(), T_base[:3, 3].copy())
         starts: list[np.ndarray] = []
         if q_seed is not None:
@@ -316,9 +329,14 @@ class Kinematics:
                 return IKResult(True, q, residual_pos=ep, residual_rot=er)
             if ep + 0.1 * er < best[0] + 0.1 * best[1]:
                 best = (ep, er, q)
-        return IKResult(False, None, residual_pos=best[0], residual_rot=best[1],
-                        reason=f"no solution within the joint limits after {s.max_starts} starts "
-                               f"(best residual {best[0] * 1000:.2f} mm, {math.degrees(best[1]):.2f} deg)")
+        return IKResult(
+            False,
+            None,
+            residual_pos=best[0],
+            residual_rot=best[1],
+            reason=f"no solution within the joint limits after {s.max_starts} starts "
+            f"(best residual {best[0] * 1000:.2f} mm, {math.degrees(best[1]):.2f} deg)",
+        )
 
     def _dls(
         self, red: _Reduced, oMdes: pin.SE3, q: np.ndarray, lower: np.ndarray, upper: np.ndarray

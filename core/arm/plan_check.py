@@ -117,8 +117,10 @@ class PlanCheck(StrictModel):
     resolution_m: float = Field(description="largest motion of any robot or held-part point between checks")
     tolerance_m: float = Field(description="penetration allowed before a contact counts as a collision")
     n_configurations_checked: int
-    min_distance_m: float = Field(description="least signed distance of any checked, not allowed pair, metres; "
-                                  "capped at the query distance (larger is better)")
+    min_distance_m: float = Field(
+        description="least signed distance of any checked, not allowed pair, metres; "
+        "capped at the query distance (larger is better)"
+    )
     closest: str | None = Field(None, description="segment and pair of min_distance_m")
     collisions: list[PlanCollision] = Field(default_factory=list)
     warnings: list[str] = Field(default_factory=list)
@@ -126,13 +128,17 @@ class PlanCheck(StrictModel):
 
     def summary(self) -> str:
         """One line for logs and reports (mm)."""
-        head = (f"{'collision-free' if self.ok else f'{len(self.collisions)} collisions'}; "
-                f"{self.n_configurations_checked} configurations at {self.resolution_m * 1000:.1f} mm; "
-                f"min distance {self.min_distance_m * 1000:.1f} mm")
+        head = (
+            f"{'collision-free' if self.ok else f'{len(self.collisions)} collisions'}; "
+            f"{self.n_configurations_checked} configurations at {self.resolution_m * 1000:.1f} mm; "
+            f"min distance {self.min_distance_m * 1000:.1f} mm"
+        )
         if self.collisions:
             c = max(self.collisions, key=lambda c: c.penetration_m)
-            head += (f"; deepest: segment {c.segment} ({c.label}) {c.a} / {c.b} "
-                     f"{c.penetration_m * 1000:.1f} mm at {c.time_s:.2f} s")
+            head += (
+                f"; deepest: segment {c.segment} ({c.label}) {c.a} / {c.b} "
+                f"{c.penetration_m * 1000:.1f} mm at {c.time_s:.2f} s"
+            )
         return head
 
 
@@ -169,11 +175,14 @@ def densify_by_reach(
 def _quat_matrices(q: np.ndarray) -> np.ndarray:
     """``(n, 4)`` unit quaternions (x, y, z, w) -> ``(n, 3, 3)`` rotation matrices."""
     x, y, z, w = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=-1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=-1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=-1),
-    ], axis=1)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=-1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=-1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=-1),
+        ],
+        axis=1,
+    )
 
 
 # ---------------------------------------------------------------- the checker
@@ -219,8 +228,9 @@ class PlanChecker:
         touch: Mapping[str, Sequence[str]] = TOUCH_RULES,
     ) -> None:
         if tolerance < 0.0 or query_distance <= 0.0:
-            raise UserError(f"plan check: tolerance ({tolerance}) must be >= 0 and query_distance "
-                            f"({query_distance}) > 0 metres")
+            raise UserError(
+                f"plan check: tolerance ({tolerance}) must be >= 0 and query_distance ({query_distance}) > 0 metres"
+            )
         self.world, self.p = world, world.p
         self.arms = dict(arms)
         self.table = (tuple(table_center), tuple(table_size), float(table_height))
@@ -261,13 +271,17 @@ class PlanChecker:
                 elif kind == pybullet.GEOM_SPHERE:
                     c, r = pos, float(dims[0])
                 elif kind in (pybullet.GEOM_CYLINDER, pybullet.GEOM_CAPSULE):
-                    c, r = pos, float(np.hypot(dims[1], 0.5 * dims[0])) + (dims[1] if kind == pybullet.GEOM_CAPSULE
-                                                                           else 0.0)
+                    c, r = (
+                        pos,
+                        float(np.hypot(dims[1], 0.5 * dims[0])) + (dims[1] if kind == pybullet.GEOM_CAPSULE else 0.0),
+                    )
                 else:  # a mesh (URDF cylinders become convex hulls): its vertices, in the same frame
                     v = np.asarray(p.getMeshData(self.robot, link, collisionShapeIndex=i)[1], dtype=float)
                     if len(v) == 0:
-                        raise UserError(f"plan check: PyBullet gives no vertices for collision shape {i} of link "
-                                        f"{self.name_of[link]!r}; use boxes, cylinders or meshes in the URDF")
+                        raise UserError(
+                            f"plan check: PyBullet gives no vertices for collision shape {i} of link "
+                            f"{self.name_of[link]!r}; use boxes, cylinders or meshes in the URDF"
+                        )
                     c = 0.5 * (v.min(axis=0) + v.max(axis=0))
                     r = float(np.max(np.linalg.norm(v - c, axis=1)))
                 links.append(link)
@@ -319,8 +333,12 @@ class PlanChecker:
         origin = np.array([s[4] for s in states])
         com = np.array([s[0] for s in states])
         base = np.asarray(self.p.getBasePositionAndOrientation(self.robot)[0])
-        step = np.array([np.linalg.norm(origin[k] - (origin[self.parent[k]] if self.parent[k] >= 0 else base))
-                         for k in range(self.n_links)])
+        step = np.array(
+            [
+                np.linalg.norm(origin[k] - (origin[self.parent[k]] if self.parent[k] >= 0 else base))
+                for k in range(self.n_links)
+            ]
+        )
         held_r = {}
         for arm, h in held.items():
             lo, hi = (np.asarray(v) for v in self.p.getAABB(self.world.parts[h.part][0], -1))
@@ -377,8 +395,14 @@ class PlanChecker:
             reset(self.robot, j, float(v), 0.0)
 
     # ------------------------------------------------------------ one configuration
-    def _measure(self, holder: str | None, touch: tuple[str, ...], held: Mapping[str, _Held],
-                 moved: Mapping[str, str], pairs: np.ndarray | slice = slice(None)) -> list[tuple[str, str, float]]:
+    def _measure(
+        self,
+        holder: str | None,
+        touch: tuple[str, ...],
+        held: Mapping[str, _Held],
+        moved: Mapping[str, str],
+        pairs: np.ndarray | slice = slice(None),
+    ) -> list[tuple[str, str, float]]:
         """Signed distances (metres) of every checked, not allowed pair within the query distance.
 
         ``holder`` is the arm of the segment; ``touch`` what its held part may touch; ``moved``
@@ -453,8 +477,15 @@ class PlanChecker:
                 if dist < -self.tolerance:
                     key = (k, a, b)
                     if key not in hits:
-                        hits[key] = PlanCollision(segment=k, label=label, time_s=round(float(t), 4), a=a, b=b,
-                                                  penetration_m=-dist, configurations=0)
+                        hits[key] = PlanCollision(
+                            segment=k,
+                            label=label,
+                            time_s=round(float(t), 4),
+                            a=a,
+                            b=b,
+                            penetration_m=-dist,
+                            configurations=0,
+                        )
                     c = hits[key]
                     c.penetration_m = max(c.penetration_m, -dist)
                     c.configurations += 1
@@ -470,20 +501,23 @@ class PlanChecker:
                 continue
             tr = seg.trajectory
             if tr.arm not in self.arms:
-                raise UserError(f"plan check: segment {k} ({seg.label}) moves arm {tr.arm!r}; "
-                                f"the robot has {sorted(self.arms)}")
+                raise UserError(
+                    f"plan check: segment {k} ({seg.label}) moves arm {tr.arm!r}; the robot has {sorted(self.arms)}"
+                )
             ids = self.world.joint_ids(list(tr.joint_names))
             q = np.atleast_2d(np.asarray(tr.positions, dtype=float))
             gap = float(np.max(np.abs(q[0] - self.world.get_joints(list(tr.joint_names)))))
             if gap > 1e-4:
                 warnings.append(f"segment {k} ({seg.label}) starts {gap:.4f} rad from where its joints are")
-            times, dense = densify_by_reach(np.asarray(tr.times, dtype=float), q, self.joint_reach(ids, held),
-                                            resolution)
+            times, dense = densify_by_reach(
+                np.asarray(tr.times, dtype=float), q, self.joint_reach(ids, held), resolution
+            )
             moved = {h.part: a for a, h in held.items()}
             # self pairs that cannot change within this segment are measured at its first configuration only
             moving = np.unique(np.concatenate([self._descendants(j) for j in ids]))
-            live = np.nonzero(np.isin(self.sphere_link[self.pair_sa], moving)
-                              | np.isin(self.sphere_link[self.pair_sb], moving))[0]
+            live = np.nonzero(
+                np.isin(self.sphere_link[self.pair_sa], moving) | np.isin(self.sphere_link[self.pair_sb], moving)
+            )[0]
             for i, (t, qi) in enumerate(zip(times, dense, strict=True)):
                 self._set_q(ids, qi)
                 for arm, h in held.items():  # a moving chest joint may move the idle arm's part too
@@ -492,12 +526,21 @@ class PlanChecker:
                 record(k, seg.label, float(t), found)
             count += len(dense)
         collisions = sorted(hits.values(), key=lambda c: (c.segment, -c.penetration_m))
-        return PlanCheck(ok=not collisions, resolution_m=float(resolution), tolerance_m=self.tolerance,
-                         n_configurations_checked=count, min_distance_m=float(best[0]), closest=best[1],
-                         collisions=collisions, warnings=warnings, seconds=round(time.perf_counter() - t0, 3))
+        return PlanCheck(
+            ok=not collisions,
+            resolution_m=float(resolution),
+            tolerance_m=self.tolerance,
+            n_configurations_checked=count,
+            min_distance_m=float(best[0]),
+            closest=best[1],
+            collisions=collisions,
+            warnings=warnings,
+            seconds=round(time.perf_counter() - t0, 3),
+        )
 
-    def _gripper(self, ev: GripperEvent, parts: Mapping[str, tuple[PartModel, np.ndarray]],
-                 held: dict[str, _Held], k: int) -> None:
+    def _gripper(
+        self, ev: GripperEvent, parts: Mapping[str, tuple[PartModel, np.ndarray]], held: dict[str, _Held], k: int
+    ) -> None:
         if ev.arm not in self.arms:
             raise UserError(f"plan check: segment {k} grips with arm {ev.arm!r}; the robot has {sorted(self.arms)}")
         spec = self.arms[ev.arm]
@@ -512,8 +555,9 @@ class PlanChecker:
         self._set_q(fingers, np.minimum(np.asarray(spec.open_values), half))
         if ev.attach is not None:
             if ev.attach not in parts:
-                raise UserError(f"plan check: segment {k} attaches {ev.attach!r}, which is not among the parts "
-                                f"{sorted(parts)}")
+                raise UserError(
+                    f"plan check: segment {k} attaches {ev.attach!r}, which is not among the parts {sorted(parts)}"
+                )
             held[ev.arm] = self._grab(ev.arm, ev.attach)
 
 
@@ -541,10 +585,16 @@ def recheck_plan(
     """
     world = PyBulletWorld(Path(urdf), np.asarray(T_world_base, dtype=float))
     try:
-        checker = PlanChecker(world, arms, table_center=table_center, table_size=table_size,
-                              table_height=table_height, skip_pairs=skip_pairs, tolerance=tolerance,
-                              query_distance=query_distance)
+        checker = PlanChecker(
+            world,
+            arms,
+            table_center=table_center,
+            table_size=table_size,
+            table_height=table_height,
+            skip_pairs=skip_pairs,
+            tolerance=tolerance,
+            query_distance=query_distance,
+        )
         return checker.check(plan, parts, home, resolution=resolution)
     finally:
         world.close()
-

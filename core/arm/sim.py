@@ -86,8 +86,15 @@ class PyBulletWorld:
         :data:`POSITION_GAIN`); :meth:`grip` drives the fingers with PyBullet's default.
     """
 
-    def __init__(self, urdf: Path, T_world_base: np.ndarray, *, gui: bool = False, time_step: float = 1.0 / 240.0,
-                 position_gain: float = POSITION_GAIN):
+    def __init__(
+        self,
+        urdf: Path,
+        T_world_base: np.ndarray,
+        *,
+        gui: bool = False,
+        time_step: float = 1.0 / 240.0,
+        position_gain: float = POSITION_GAIN,
+    ):
         mode = pybullet.DIRECT
         if gui:
             if os.environ.get("DISPLAY") or os.name == "nt":
@@ -116,9 +123,14 @@ class PyBulletWorld:
         # a 1 deg chest drift moves the hands ~9 mm away from where the kinematic model puts them.
         for j in self.joint_index.values():
             if self.p.getJointInfo(self.robot, j)[2] in (pybullet.JOINT_REVOLUTE, pybullet.JOINT_PRISMATIC):
-                self.p.setJointMotorControl2(self.robot, j, pybullet.POSITION_CONTROL,
-                                             targetPosition=self.p.getJointState(self.robot, j)[0], force=1000.0,
-                                             positionGain=self.position_gain)
+                self.p.setJointMotorControl2(
+                    self.robot,
+                    j,
+                    pybullet.POSITION_CONTROL,
+                    targetPosition=self.p.getJointState(self.robot, j)[0],
+                    force=1000.0,
+                    positionGain=self.position_gain,
+                )
         self.table_id: int | None = None
         self.parts: dict[str, tuple[int, PartModel]] = {}
         self.constraints: dict[str, tuple[int, str]] = {}  # arm -> (constraint id, part name)
@@ -138,8 +150,13 @@ class PyBulletWorld:
         ids = self.joint_ids(names)
         for j, v in zip(ids, np.asarray(q, dtype=float), strict=True):
             self.p.resetJointState(self.robot, j, float(v), 0.0)
-        self.p.setJointMotorControlArray(self.robot, ids, pybullet.POSITION_CONTROL, targetPositions=list(q),
-                                         positionGains=[self.position_gain] * len(ids))
+        self.p.setJointMotorControlArray(
+            self.robot,
+            ids,
+            pybullet.POSITION_CONTROL,
+            targetPositions=list(q),
+            positionGains=[self.position_gain] * len(ids),
+        )
 
     def get_joints(self, names: list[str]) -> np.ndarray:
         ids = self.joint_ids(names)
@@ -156,8 +173,14 @@ class PyBulletWorld:
         return _pb_to_pose(st[4], st[5])
 
     # ------------------------------------------------------------ world
-    def reset_world(self, table_center: tuple[float, float], table_size: tuple[float, float], table_height: float,
-                    parts: dict[str, tuple[PartModel, np.ndarray]], thickness: float = 0.05) -> None:
+    def reset_world(
+        self,
+        table_center: tuple[float, float],
+        table_size: tuple[float, float],
+        table_height: float,
+        parts: dict[str, tuple[PartModel, np.ndarray]],
+        thickness: float = 0.05,
+    ) -> None:
         """Remove the old table, parts and grasps; add the table (top at ``table_height``) and the parts."""
         for cid, _ in self.constraints.values():
             self.p.removeConstraint(cid)
@@ -170,8 +193,9 @@ class PyBulletWorld:
         half = [0.5 * table_size[0], 0.5 * table_size[1], 0.5 * thickness]
         col = self.p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
         vis = self.p.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=[0.55, 0.45, 0.35, 1.0])
-        self.table_id = self.p.createMultiBody(0.0, col, vis, [table_center[0], table_center[1],
-                                                               table_height - 0.5 * thickness])
+        self.table_id = self.p.createMultiBody(
+            0.0, col, vis, [table_center[0], table_center[1], table_height - 0.5 * thickness]
+        )
         self.p.changeDynamics(self.table_id, -1, lateralFriction=0.8, collisionMargin=CONTACT_MARGIN)
         for name, (part, T) in parts.items():
             self.spawn_part(name, part, T)
@@ -197,14 +221,24 @@ class PyBulletWorld:
         T = geometry.as_transform(T_world_part)
         col = self._collision_shape(part)
         v = np.asarray(part.mesh.vertices)
-        vis = self.p.createVisualShape(pybullet.GEOM_MESH, vertices=v.tolist(),
-                                       indices=np.asarray(part.mesh.faces).reshape(-1).tolist(),
-                                       rgbaColor=[*part.spec.color, 1.0])
+        vis = self.p.createVisualShape(
+            pybullet.GEOM_MESH,
+            vertices=v.tolist(),
+            indices=np.asarray(part.mesh.faces).reshape(-1).tolist(),
+            rgbaColor=[*part.spec.color, 1.0],
+        )
         pos, orn = _pose_to_pb(T)
-        body = self.p.createMultiBody(part.mass, col, vis, pos, orn,
-                                      baseInertialFramePosition=np.asarray(part.center_of_mass).tolist())
-        self.p.changeDynamics(body, -1, lateralFriction=1.0, spinningFriction=0.002, rollingFriction=0.0005,
-                              collisionMargin=CONTACT_MARGIN)
+        body = self.p.createMultiBody(
+            part.mass, col, vis, pos, orn, baseInertialFramePosition=np.asarray(part.center_of_mass).tolist()
+        )
+        self.p.changeDynamics(
+            body,
+            -1,
+            lateralFriction=1.0,
+            spinningFriction=0.002,
+            rollingFriction=0.0005,
+            collisionMargin=CONTACT_MARGIN,
+        )
         self.parts[name] = (body, part)
         return body
 
@@ -224,8 +258,16 @@ class PyBulletWorld:
         for _ in range(n):
             self.p.stepSimulation()
 
-    def track(self, names: list[str], times: np.ndarray, positions: np.ndarray, speed: np.ndarray,
-              forces: np.ndarray, settle: float = 1.0, tol: float = 1e-4) -> np.ndarray:
+    def track(
+        self,
+        names: list[str],
+        times: np.ndarray,
+        positions: np.ndarray,
+        speed: np.ndarray,
+        forces: np.ndarray,
+        settle: float = 1.0,
+        tol: float = 1e-4,
+    ) -> np.ndarray:
         """Follow a time-parametrised path with position control, capped at ``speed`` (rad/s).
 
         The path is sampled at every physics step (linear between waypoints);
@@ -256,8 +298,16 @@ class PyBulletWorld:
         return self.get_joints(names)
 
     # ------------------------------------------------------------ gripper
-    def grip(self, arm: str, g: GripperJoints, close: bool, part: str | None, force: float, speed: float,
-             max_time: float = 1.5) -> bool:
+    def grip(
+        self,
+        arm: str,
+        g: GripperJoints,
+        close: bool,
+        part: str | None,
+        force: float,
+        speed: float,
+        max_time: float = 1.5,
+    ) -> bool:
         """Close the fingers until they touch ``part`` (then weld it to the TCP) or open and release."""
         ids = self.joint_ids(g.finger_joints)
         if not close:
@@ -267,8 +317,9 @@ class PyBulletWorld:
                 if held in self.parts:
                     self._finger_contacts(g, self.parts[held][0], enable=True)
             for j, v in zip(ids, g.open_values, strict=True):
-                self.p.setJointMotorControl2(self.robot, j, pybullet.POSITION_CONTROL, targetPosition=v, force=force,
-                                             maxVelocity=speed)
+                self.p.setJointMotorControl2(
+                    self.robot, j, pybullet.POSITION_CONTROL, targetPosition=v, force=force, maxVelocity=speed
+                )
             for _ in range(int(max_time / self.time_step)):
                 self.p.stepSimulation()
                 if np.allclose(self.get_joints(g.finger_joints), g.open_values, atol=1e-3):
@@ -281,8 +332,9 @@ class PyBulletWorld:
             body = self.parts[part][0]
         finger_idx = [self.link_index[ln] for ln in g.finger_links]
         for j, v in zip(ids, g.closed_values, strict=True):
-            self.p.setJointMotorControl2(self.robot, j, pybullet.POSITION_CONTROL, targetPosition=v, force=force,
-                                         maxVelocity=speed)
+            self.p.setJointMotorControl2(
+                self.robot, j, pybullet.POSITION_CONTROL, targetPosition=v, force=force, maxVelocity=speed
+            )
         self._couple_fingers(arm, g)
         touching = False
         prev = self.get_joints(g.finger_joints)
@@ -300,15 +352,25 @@ class PyBulletWorld:
             return False
         # Hold the fingers where they touched and weld the part to the TCP so it cannot slip.
         for j, v in zip(ids, self.get_joints(g.finger_joints), strict=True):
-            self.p.setJointMotorControl2(self.robot, j, pybullet.POSITION_CONTROL, targetPosition=float(v),
-                                         force=force, maxVelocity=speed)
+            self.p.setJointMotorControl2(
+                self.robot, j, pybullet.POSITION_CONTROL, targetPosition=float(v), force=force, maxVelocity=speed
+            )
         T_world_tcp = self.link_pose(g.tcp_link)
         pos, orn = self.p.getBasePositionAndOrientation(body)
         T_tcp_com = np.linalg.solve(T_world_tcp, _pb_to_pose(pos, orn))
         p_rel, q_rel = _pose_to_pb(T_tcp_com)
         # The TCP link's inertial frame is its link frame (URDF inertial origin at 0), as createConstraint expects.
-        cid = self.p.createConstraint(self.robot, self.link_index[g.tcp_link], body, -1, pybullet.JOINT_FIXED,
-                                      [0, 0, 0], p_rel, [0, 0, 0], parentFrameOrientation=q_rel)
+        cid = self.p.createConstraint(
+            self.robot,
+            self.link_index[g.tcp_link],
+            body,
+            -1,
+            pybullet.JOINT_FIXED,
+            [0, 0, 0],
+            p_rel,
+            [0, 0, 0],
+            parentFrameOrientation=q_rel,
+        )
         self.p.changeConstraint(cid, maxForce=10000.0)
         # The weld stands in for friction; finger contacts on top of it fight the constraint and make the
         # part creep in the hand during fast motions (millimetres per carry), so they are off while held.
@@ -326,8 +388,9 @@ class PyBulletWorld:
             return
         f0, f1 = (self.link_index[ln] for ln in g.finger_links)
         # The fingers slide along -y and +y of the gripper link: equal joint values, opposite motion.
-        cid = self.p.createConstraint(self.robot, f0, self.robot, f1, pybullet.JOINT_GEAR, [0, 1, 0],
-                                      [0, 0, 0], [0, 0, 0])
+        cid = self.p.createConstraint(
+            self.robot, f0, self.robot, f1, pybullet.JOINT_GEAR, [0, 1, 0], [0, 0, 0], [0, 0, 0]
+        )
         self.p.changeConstraint(cid, gearRatio=-1.0, maxForce=200.0, erp=0.2)
         self._gears[arm] = cid
 
@@ -336,8 +399,18 @@ class PyBulletWorld:
             self.p.setCollisionFilterPair(self.robot, body, self.link_index[link], -1, int(enable))
 
     # ------------------------------------------------------------ cameras
-    def rgb(self, T_world_cam: np.ndarray, width: int, height: int, fx: float, fy: float, cx: float, cy: float,
-            near: float = 0.05, far: float = 5.0) -> np.ndarray:
+    def rgb(
+        self,
+        T_world_cam: np.ndarray,
+        width: int,
+        height: int,
+        fx: float,
+        fy: float,
+        cx: float,
+        cy: float,
+        near: float = 0.05,
+        far: float = 5.0,
+    ) -> np.ndarray:
         """RGB image ``(h, w, 3) uint8`` with TinyRenderer from an OpenCV-frame camera pose."""
         eye = T_world_cam[:3, 3]
         fwd = T_world_cam[:3, 2]
@@ -353,8 +426,14 @@ class PyBulletWorld:
         proj[2, 3] = -2.0 * far * near / (far - near)
         proj[3, 2] = -1.0
         # No segmentation mask: only the colours are used, and TinyRenderer's mask pass costs time per frame.
-        img = self.p.getCameraImage(width, height, view, proj.T.reshape(-1).tolist(),
-                                    renderer=pybullet.ER_TINY_RENDERER, flags=pybullet.ER_NO_SEGMENTATION_MASK)
+        img = self.p.getCameraImage(
+            width,
+            height,
+            view,
+            proj.T.reshape(-1).tolist(),
+            renderer=pybullet.ER_TINY_RENDERER,
+            flags=pybullet.ER_NO_SEGMENTATION_MASK,
+        )
         rgba = np.reshape(np.asarray(img[2], dtype=np.uint8), (height, width, 4))
         return rgba[:, :, :3].copy()
 

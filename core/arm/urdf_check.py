@@ -45,7 +45,7 @@ def _numbers(text: str | None, n: int, where: str) -> list[float]:
 def resolve_mesh(filename: str, urdf_dir: Path) -> Path:
     """Path of a mesh named in a URDF (``package://`` resolved against the URDF's folder and its parents)."""
     if filename.startswith("package://"):
-        rel = filename[len("package://"):]
+        rel = filename[len("package://") :]
         for base in (urdf_dir, *urdf_dir.parents):
             cand = base / rel
             if cand.is_file():
@@ -55,7 +55,7 @@ def resolve_mesh(filename: str, urdf_dir: Path) -> Path:
                 return cand
         return urdf_dir / rel
     if filename.startswith("file://"):
-        filename = filename[len("file://"):]
+        filename = filename[len("file://") :]
     p = Path(filename)
     return p if p.is_absolute() else urdf_dir / p
 

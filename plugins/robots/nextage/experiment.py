@@ -137,12 +137,21 @@ class Reachability(Experiment):
             cells = np.asarray(m["cells"])
             grid = cells[:, 2].reshape(int(m["nx"]), int(m["ny"]))
             fig, ax = plt.subplots(figsize=(7, 4))
-            im = ax.imshow(grid, origin="lower", cmap="viridis", vmin=0.0, vmax=1.0, aspect="auto",
-                           extent=[cells[:, 1].min(), cells[:, 1].max(), cells[:, 0].min(), cells[:, 0].max()])
+            im = ax.imshow(
+                grid,
+                origin="lower",
+                cmap="viridis",
+                vmin=0.0,
+                vmax=1.0,
+                aspect="auto",
+                extent=[cells[:, 1].min(), cells[:, 1].max(), cells[:, 0].min(), cells[:, 0].max()],
+            )
             ax.set_xlabel("world y (m)")
             ax.set_ylabel("world x (m)")
-            ax.set_title(f"{arm} arm, {grasp} grasps: feasible yaw fraction "
-                         f"(IK {100 * m['ik_success_rate']:.0f}%, median {m['median_ms']:.2f} ms)")
+            ax.set_title(
+                f"{arm} arm, {grasp} grasps: feasible yaw fraction "
+                f"(IK {100 * m['ik_success_rate']:.0f}%, median {m['median_ms']:.2f} ms)"
+            )
             fig.colorbar(im, ax=ax)
             path = out_dir / f"reachability_{arm}_{grasp}_seed{r.get('seed')}.png"
             with atomic_path(path) as tmp:

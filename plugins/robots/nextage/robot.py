@@ -63,12 +63,20 @@ def _srdf_disabled() -> list[tuple[str, str]]:
     pairs = [("CHEST_JOINT0_Link", "HEAD_JOINT1_Link")]
     for k in range(4):
         pairs += [("HEAD_JOINT0_Link", f"LARM_JOINT{k}_Link"), ("HEAD_JOINT0_Link", f"RARM_JOINT{k}_Link")]
-    pairs += [("HEAD_JOINT0_Link", "WAIST"), ("HEAD_JOINT1_Link", "LARM_JOINT0_Link"),
-              ("HEAD_JOINT1_Link", "RARM_JOINT0_Link"), ("HEAD_JOINT1_Link", "WAIST")]
+    pairs += [
+        ("HEAD_JOINT0_Link", "WAIST"),
+        ("HEAD_JOINT1_Link", "LARM_JOINT0_Link"),
+        ("HEAD_JOINT1_Link", "RARM_JOINT0_Link"),
+        ("HEAD_JOINT1_Link", "WAIST"),
+    ]
     for s in ("LARM", "RARM"):
-        pairs += [(f"{s}_JOINT0_Link", f"{s}_JOINT2_Link"), (f"{s}_JOINT0_Link", f"{s}_JOINT3_Link"),
-                  (f"{s}_JOINT1_Link", f"{s}_JOINT3_Link"), (f"{s}_JOINT2_Link", f"{s}_JOINT4_Link"),
-                  (f"{s}_FINGER0_Link", f"{s}_FINGER1_Link")]
+        pairs += [
+            (f"{s}_JOINT0_Link", f"{s}_JOINT2_Link"),
+            (f"{s}_JOINT0_Link", f"{s}_JOINT3_Link"),
+            (f"{s}_JOINT1_Link", f"{s}_JOINT3_Link"),
+            (f"{s}_JOINT2_Link", f"{s}_JOINT4_Link"),
+            (f"{s}_FINGER0_Link", f"{s}_FINGER1_Link"),
+        ]
     pairs += [("LARM_JOINT0_Link", f"RARM_JOINT{k}_Link") for k in range(4)]
     pairs += [("RARM_JOINT0_Link", f"LARM_JOINT{k}_Link") for k in range(1, 4)]
     return pairs
@@ -87,11 +95,15 @@ class NextageSettings(ArmRobotSettings):
         "ready", description="home: hands 0.15 m above the table (ready) or the upstream init pose"
     )
     urdf: str | None = Field(
-        None, description="the vendor's NextageOpen.urdf (nextage_description) instead of our primitive model; "
-        "relative paths from the working directory; our gripper goes on its wrist flanges")
+        None,
+        description="the vendor's NextageOpen.urdf (nextage_description) instead of our primitive model; "
+        "relative paths from the working directory; our gripper goes on its wrist flanges",
+    )
     package_paths: list[str] = Field(
-        default_factory=list, description="folders holding ROS packages (package.xml) for package:// mesh URIs "
-        "of `urdf`; the URDF's own folder and its parents are always searched")
+        default_factory=list,
+        description="folders holding ROS packages (package.xml) for package:// mesh URIs "
+        "of `urdf`; the URDF's own folder and its parents are always searched",
+    )
 
 
 class NextagePyBullet(ArmRobot):
@@ -115,15 +127,27 @@ class NextagePyBullet(ArmRobot):
                 joints = ["CHEST_JOINT0", *joints]
                 home = np.concatenate([[0.0], home])
             half = 0.5 * GRIPPER.max_opening
-            gripper = GripperJoints([f"{pre}_FINGER0_JOINT", f"{pre}_FINGER1_JOINT"], [half, half], [0.0, 0.0],
-                                    f"{pre}_TCP_Link", [f"{pre}_FINGER0_Link", f"{pre}_FINGER1_Link"])
-            arms[arm] = ArmSpec(joints, f"{pre}_TCP_Link", home, gripper,
-                                [f"{pre}_GRIPPER_Link", f"{pre}_FINGER0_Link", f"{pre}_FINGER1_Link"])
+            gripper = GripperJoints(
+                [f"{pre}_FINGER0_JOINT", f"{pre}_FINGER1_JOINT"],
+                [half, half],
+                [0.0, 0.0],
+                f"{pre}_TCP_Link",
+                [f"{pre}_FINGER0_Link", f"{pre}_FINGER1_Link"],
+            )
+            arms[arm] = ArmSpec(
+                joints,
+                f"{pre}_TCP_Link",
+                home,
+                gripper,
+                [f"{pre}_GRIPPER_Link", f"{pre}_FINGER0_Link", f"{pre}_FINGER1_Link"],
+            )
         if st.urdf is None:
             urdf = URDF_PATH
         else:
             if not Path(st.urdf).expanduser().is_file():
-                raise UserError(f"robot.settings.urdf: {st.urdf} does not exist (relative paths are from the working "
-                                f"directory {Path.cwd()})")
+                raise UserError(
+                    f"robot.settings.urdf: {st.urdf} does not exist (relative paths are from the working "
+                    f"directory {Path.cwd()})"
+                )
             urdf = vendor_urdf(st.urdf, st.package_paths)
         self._setup(urdf, T, arms, nextage_hand(st.grip_force), SRDF_DISABLED)

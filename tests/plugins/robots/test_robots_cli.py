@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from asmteach.core.cli import main
-from asmteach.plugins.robots.nextage.experiment import Reachability, ReachabilityParams, grasp_pose
 from asmteach.plugins.robots.nextage.build_urdf import URDF_PATH
+from asmteach.plugins.robots.nextage.experiment import Reachability, ReachabilityParams, grasp_pose
 
 
 def test_robot_check_ok_and_bad(tmp_path, capsys) -> None:

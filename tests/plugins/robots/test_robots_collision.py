@@ -115,8 +115,13 @@ def test_pruned_clearance_equals_every_pair_measured(robot: NextagePyBullet) -> 
     for i in range(len(qs)):
         for k in mov + world:
             objs[k].fcl_obj.setTransform(_tf(poses[i, k]))
-        brute.append(min(max(0.0, fcl.distance(objs[a].fcl_obj, objs[b].fcl_obj, fcl.DistanceRequest(),
-                                               fcl.DistanceResult())) for a in mov for b in world))
+        brute.append(
+            min(
+                max(0.0, fcl.distance(objs[a].fcl_obj, objs[b].fcl_obj, fcl.DistanceRequest(), fcl.DistanceResult()))
+                for a in mov
+                for b in world
+            )
+        )
     brute = np.array(brute)
     assert len(qs) > 20 and brute.min() < 0.1 < brute.max()
     assert np.allclose(robot.clearance("right", qs), brute, atol=1e-12)

@@ -83,12 +83,16 @@ def test_pinocchio_and_pybullet_agree(kin: Kinematics) -> None:
 
 def test_bad_urdfs_name_file_and_element(tmp_path) -> None:
     bad = tmp_path / "arm.urdf"
-    bad.write_text('<robot name="r"><link name="a"/><link name="b"/><joint name="j" type="revolute">'
-                   '<parent link="a"/><child link="b"/><limit lower="1" upper="0"/></joint></robot>')
+    bad.write_text(
+        '<robot name="r"><link name="a"/><link name="b"/><joint name="j" type="revolute">'
+        '<parent link="a"/><child link="b"/><limit lower="1" upper="0"/></joint></robot>'
+    )
     with pytest.raises(UserError, match=r"arm.urdf: <joint name='j'> <limit>: lower 1.0 > upper 0.0"):
         check_urdf(bad)
-    bad.write_text('<robot name="r"><link name="a"><visual><geometry><mesh filename="nope.stl"/></geometry>'
-                   "</visual></link></robot>")
+    bad.write_text(
+        '<robot name="r"><link name="a"><visual><geometry><mesh filename="nope.stl"/></geometry>'
+        "</visual></link></robot>"
+    )
     with pytest.raises(UserError, match=r"<link name='a'> <visual> <mesh filename='nope.stl'>"):
         check_urdf(bad)
     bad.write_text("<robot><link name='a'>")

@@ -58,8 +58,15 @@ def _line(robot: NextagePyBullet, q_from: np.ndarray, T_to: np.ndarray) -> np.nd
 
 def _segment(robot: NextagePyBullet, label: str, path: np.ndarray, dt: float = 0.05) -> PlanSegment:
     path = np.atleast_2d(path)
-    return PlanSegment(label=label, trajectory=Trajectory(arm="left", joint_names=robot.joint_names("left"),
-                                                          times=(np.arange(len(path)) * dt).tolist(), positions=path))
+    return PlanSegment(
+        label=label,
+        trajectory=Trajectory(
+            arm="left",
+            joint_names=robot.joint_names("left"),
+            times=(np.arange(len(path)) * dt).tolist(),
+            positions=path,
+        ),
+    )
 
 
 def _joint_line(q0: np.ndarray, q1: np.ndarray, n: int = 5) -> np.ndarray:
@@ -68,8 +75,16 @@ def _joint_line(q0: np.ndarray, q1: np.ndarray, n: int = 5) -> np.ndarray:
 
 
 def _arms(robot: NextagePyBullet, *, hands: bool = True) -> dict[str, CheckedArm]:
-    return {a: CheckedArm(tuple(s.joints), s.tcp_link, tuple(s.gripper.finger_joints), tuple(s.gripper.open_values),
-                          tuple(s.hand_links) if hands else ()) for a, s in robot._arms.items()}
+    return {
+        a: CheckedArm(
+            tuple(s.joints),
+            s.tcp_link,
+            tuple(s.gripper.finger_joints),
+            tuple(s.gripper.open_values),
+            tuple(s.hand_links) if hands else (),
+        )
+        for a, s in robot._arms.items()
+    }
 
 
 def test_a_hand_driven_through_the_table_is_reported_with_its_segment_and_pair(robot) -> None:
@@ -77,8 +92,9 @@ def test_a_hand_driven_through_the_table_is_reported_with_its_segment_and_pair(r
     high = _line(robot, home, _tcp_at(robot, 0.30, 0.22, 0.25))
     # TCP 10 mm below the table top: the fingertips (17.5 mm below the TCP) end 27.5 mm deep
     down = _line(robot, high[-1], _tcp_at(robot, 0.30, 0.22, -0.010))
-    plan = Plan(segments=[_segment(robot, "move to pre-grasp 0 of box", high),
-                          _segment(robot, "approach grasp 0", down)])
+    plan = Plan(
+        segments=[_segment(robot, "move to pre-grasp 0 of box", high), _segment(robot, "approach grasp 0", down)]
+    )
     check = robot.verify_plan(plan, {}, TABLE)
     assert not check.ok
     assert {c.segment for c in check.collisions} == {1}
@@ -99,8 +115,12 @@ def test_a_free_motion_high_above_the_table_is_clean(robot) -> None:
     home = robot.home("left")
     target = robot.ik("left", _tcp_at(robot, 0.35, 0.30, 0.30), q_seed=home)
     assert target.success
-    plan = Plan(segments=[_segment(robot, "move high", np.stack([home, target.q]), dt=1.0),
-                          _segment(robot, "left arm home", np.stack([target.q, home]), dt=1.0)])
+    plan = Plan(
+        segments=[
+            _segment(robot, "move high", np.stack([home, target.q]), dt=1.0),
+            _segment(robot, "left arm home", np.stack([target.q, home]), dt=1.0),
+        ]
+    )
     check = robot.verify_plan(plan, {"post": (_block("post", (0.04, 0.04, 0.10)), _at(0.45, -0.2))}, TABLE)
     assert check.ok, check.summary()
     assert check.collisions == [] and check.warnings == []
@@ -129,17 +149,23 @@ def _carry_plan(robot: NextagePyBullet, width: float) -> Plan:
     down = _line(robot, home, _tcp_at(robot, 0.25, 0.20, 0.04))
     up = _line(robot, down[-1], _tcp_at(robot, 0.25, 0.20, 0.12))
     over = _line(robot, up[-1], _tcp_at(robot, 0.25, -0.02, 0.12))
-    return Plan(segments=[
-        _segment(robot, "approach grasp 0", down),
-        PlanSegment(label="close on box", gripper=GripperEvent(arm="left", action="close", width=width, attach="box")),
-        _segment(robot, "lift box", up),
-        _segment(robot, "carry box to the post", over),
-    ])
+    return Plan(
+        segments=[
+            _segment(robot, "approach grasp 0", down),
+            PlanSegment(
+                label="close on box", gripper=GripperEvent(arm="left", action="close", width=width, attach="box")
+            ),
+            _segment(robot, "lift box", up),
+            _segment(robot, "carry box to the post", over),
+        ]
+    )
 
 
 def _carry_parts() -> dict:
-    return {"box": (_block("box", (0.04, 0.04, 0.06)), _at(0.25, 0.20)),
-            "post": (_block("post", (0.04, 0.04, 0.20)), _at(0.25, 0.05))}
+    return {
+        "box": (_block("box", (0.04, 0.04, 0.06)), _at(0.25, 0.20)),
+        "post": (_block("post", (0.04, 0.04, 0.20)), _at(0.25, 0.05)),
+    }
 
 
 def test_a_held_box_carried_through_a_part_is_reported_but_the_fingers_holding_it_are_not(robot) -> None:
@@ -156,9 +182,18 @@ def test_a_held_box_carried_through_a_part_is_reported_but_the_fingers_holding_i
     assert box_post.penetration_m > 0.01  # it goes right through, not grazing
     # the same replay with no hand links allowed to touch the held part: the squeeze is reported
     st = robot.settings
-    strict = recheck_plan(robot.urdf, robot.T_world_base, plan, _carry_parts(), _arms(robot, hands=False),
-                          {a: robot.home(a) for a in robot.arms}, table_center=st.table_center,
-                          table_size=st.table_size, table_height=0.0, skip_pairs=robot.checker.disabled)
+    strict = recheck_plan(
+        robot.urdf,
+        robot.T_world_base,
+        plan,
+        _carry_parts(),
+        _arms(robot, hands=False),
+        {a: robot.home(a) for a in robot.arms},
+        table_center=st.table_center,
+        table_size=st.table_size,
+        table_height=0.0,
+        skip_pairs=robot.checker.disabled,
+    )
     squeezed = [c for c in strict.collisions if c.b == "box" and "FINGER" in c.a]
     assert {c.segment for c in squeezed} >= {1, 2}
     assert max(c.penetration_m for c in squeezed) == pytest.approx(0.002, abs=5e-4)
@@ -182,15 +217,24 @@ def test_a_part_let_go_just_above_the_table_lands_on_it(robot) -> None:
     # the box is put down 1 mm up (the planner's release gap), or 10 mm up (a real drop the check keeps)
     for gap, z_after in ((0.001, 0.0), (0.010, 0.010)):
         plan = _carry_plan(robot, width=0.04)
-        lowered = _line(robot, np.asarray(plan.segments[2].trajectory.positions)[-1], _tcp_at(robot, 0.25, 0.20,
-                                                                                               0.04 + gap))
-        plan.segments[3:] = [_segment(robot, "place box", lowered),
-                             PlanSegment(label="release box", gripper=GripperEvent(arm="left", action="open"))]
+        lowered = _line(
+            robot, np.asarray(plan.segments[2].trajectory.positions)[-1], _tcp_at(robot, 0.25, 0.20, 0.04 + gap)
+        )
+        plan.segments[3:] = [
+            _segment(robot, "place box", lowered),
+            PlanSegment(label="release box", gripper=GripperEvent(arm="left", action="open")),
+        ]
         world = PyBulletWorld(robot.urdf, robot.T_world_base)
         try:
             st = robot.settings
-            checker = PlanChecker(world, _arms(robot), table_center=st.table_center, table_size=st.table_size,
-                                  table_height=0.0, skip_pairs=robot.checker.disabled)
+            checker = PlanChecker(
+                world,
+                _arms(robot),
+                table_center=st.table_center,
+                table_size=st.table_size,
+                table_height=0.0,
+                skip_pairs=robot.checker.disabled,
+            )
             assert checker.check(plan, _carry_parts(), {a: robot.home(a) for a in robot.arms}).ok
             pos, _ = world.p.getBasePositionAndOrientation(world.parts["box"][0])
             assert pos[2] - 0.03 == pytest.approx(z_after, abs=2e-4)  # the base frame is the box's centre
@@ -203,16 +247,21 @@ def test_densification_keeps_every_point_within_the_resolution_on_a_fast_swing(r
     try:
         st = robot.settings
         world.reset_world(st.table_center, st.table_size, 0.0, {})
-        checker = PlanChecker(world, _arms(robot), table_center=st.table_center, table_size=st.table_size,
-                              table_height=0.0, skip_pairs=robot.checker.disabled)
+        checker = PlanChecker(
+            world,
+            _arms(robot),
+            table_center=st.table_center,
+            table_size=st.table_size,
+            table_height=0.0,
+            skip_pairs=robot.checker.disabled,
+        )
         names = robot.joint_names("left")
         ids = world.joint_ids(names)
         q0 = robot.home("left")
         q1 = q0.copy()
         q0[0], q1[0] = -0.7, 0.5  # the shoulder swings 1.2 rad in 0.1 s
         world.set_joints(names, q0)
-        times, dense = densify_by_reach(np.array([0.0, 0.1]), np.stack([q0, q1]), checker.joint_reach(ids, {}),
-                                        0.005)
+        times, dense = densify_by_reach(np.array([0.0, 0.1]), np.stack([q0, q1]), checker.joint_reach(ids, {}), 0.005)
         assert np.all(np.diff(times) > 0) and times[0] == 0.0 and times[-1] == 0.1
         np.testing.assert_allclose(dense[[0, -1]], [q0, q1])
         corners = []
@@ -253,14 +302,21 @@ def test_densify_by_reach_keeps_waypoints_and_splits_by_the_worst_point() -> Non
 
 
 def test_bad_input_says_what_to_fix(robot) -> None:
-    plan = Plan(segments=[PlanSegment(label="close on ghost",
-                                      gripper=GripperEvent(arm="left", action="close", attach="ghost"))])
+    plan = Plan(
+        segments=[PlanSegment(label="close on ghost", gripper=GripperEvent(arm="left", action="close", attach="ghost"))]
+    )
     with pytest.raises(UserError, match="attaches 'ghost'"):
         robot.verify_plan(plan, {}, TABLE)
     with pytest.raises(UserError, match="resolution must be > 0"):
         robot.verify_plan(Plan(), {}, TABLE, resolution=0.0)
-    bad = Plan(segments=[PlanSegment(label="x", trajectory=Trajectory(arm="middle", joint_names=["LARM_JOINT0"],
-                                                                      times=[0.0], positions=[[0.0]]))])
+    bad = Plan(
+        segments=[
+            PlanSegment(
+                label="x",
+                trajectory=Trajectory(arm="middle", joint_names=["LARM_JOINT0"], times=[0.0], positions=[[0.0]]),
+            )
+        ]
+    )
     with pytest.raises(UserError, match="arm 'middle'"):
         robot.verify_plan(bad, {}, TABLE)
 
