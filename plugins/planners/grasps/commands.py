@@ -16,6 +16,7 @@ import numpy as np
 import trimesh
 from pydantic import ValidationError
 
+from asmteach.core import registry
 from asmteach.core.config import check_finite, format_validation_error
 from asmteach.core.errors import UserError
 from asmteach.core.hooks import hookimpl
@@ -30,19 +31,33 @@ from asmteach.plugins.planners.grasps.render import render_grasps
 
 __all__ = ["asmteach_add_commands", "load_hand", "load_parts", "run_grasps"]
 
+# Names kept from before the hand came from the robot registry (configs and scripts say "nextage").
+_ROBOT_ALIASES = {"nextage": "nextage_pybullet"}
 
 
 def load_hand(spec: str) -> HandSpec:
-    """``"nextage"`` (the project's robot gripper) or a YAML/JSON file of :class:`HandSpec` fields."""
-    if spec == "nextage":
+    """The gripper of a registered robot plugin (``"nextage_pybullet"``, ``"urdf_arm"``; ``"nextage"`` is
+    the Nextage's) or a YAML/JSON file of :class:`HandSpec` fields.
+
+    A robot's hand is read from the robot built with its default settings,
+    then closed again, so the grasp planner names no robot module.
+    """
+    robots = [info.name for info in registry.discover("robots", load=False)]
+    name = _ROBOT_ALIASES.get(spec, spec)
+    if name in robots:
+        robot = registry.create("robots", name)
         try:
-            from asmteach.plugins.robots.nextage.hand import nextage_hand
-        except ImportError as exc:
-            raise UserError(f"--hand nextage needs the Nextage robot plugin, which failed to import: {exc}") from None
-        return nextage_hand()
+            return robot.hand
+        finally:
+            close = getattr(robot, "close", None)
+            if callable(close):
+                close()
     path = Path(spec)
     if not path.is_file():
-        raise UserError(f"--hand: {spec!r} is neither 'nextage' nor an existing HandSpec YAML/JSON file")
+        raise UserError(
+            f"--hand: {spec!r} is neither a robot ({', '.join(sorted(robots))}, or nextage) "
+            "nor an existing HandSpec YAML/JSON file"
+        )
     raw = read_yaml(path)
     check_finite(raw, str(path))  # a NaN passes every bound of the hand's geometry
     try:
@@ -138,7 +153,9 @@ def asmteach_add_commands(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="JSON file to write; the PNG goes next to it")
     p.add_argument("--units", choices=["m", "mm"], default="m", help="units of a mesh file's coordinates")
     p.add_argument("--part", default=None, help="for a structure: a, b or the part's name (default both)")
-    p.add_argument("--hand", default="nextage", help="'nextage' or a HandSpec YAML/JSON file")
+    p.add_argument(
+        "--hand", default="nextage", help="a robot whose gripper to use (nextage, urdf_arm) or a HandSpec YAML/JSON"
+    )
     p.add_argument("--mu", type=float, default=0.3, help="friction coefficient of the antipodal test")
     p.add_argument("--pad-min-support", type=float, default=None,
                    help="optional share of each pad in contact (default 0: the contact model decides; 1: pads "

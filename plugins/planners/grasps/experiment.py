@@ -39,7 +39,7 @@ class GraspHoldParams(StrictModel):
         description="folders of structure YAMLs, relative to the experiment file",
     )
     part: str = Field(description="name of the part to test (part_a or part_b of a structure in the library)")
-    hand: str = Field("nextage", description="'nextage' or a HandSpec YAML/JSON file")
+    hand: str = Field("nextage", description="a robot whose gripper (nextage, urdf_arm) or a HandSpec YAML/JSON file")
     planner: dict[str, Any] = Field(default_factory=dict, description="antipodal planner settings")
     grasps_per_part: int = Field(20, ge=1, description="grasps drawn at random from the planned ones")
     friction: float = Field(0.3, gt=0.0, description="pad-part friction coefficient in the simulator")
@@ -73,7 +73,8 @@ class GraspHold(Experiment):
         if params.part not in parts:
             raise UserError(f"part {params.part!r} is not in the library ({', '.join(sorted(parts))})")
         part = parts[params.part]
-        hand_spec = params.hand if params.hand == "nextage" else str(self.path(params.hand))
+        # a file named relative to the experiment file, else a robot whose gripper it is
+        hand_spec = str(self.path(params.hand)) if self.path(params.hand).is_file() else params.hand
         hand = load_hand(hand_spec)
         planner = AntipodalGraspPlanner({**params.planner, "cache": False}, seed=seed)
         t0 = time.perf_counter()

@@ -93,3 +93,15 @@ def test_bad_meshes_exit_2(writer, message, hand_file, tmp_path, capsys) -> None
     assert code == 2
     assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "g.json").exists()
+
+
+def test_hand_from_a_registered_robot_or_refused_in_one_line(tmp_path) -> None:
+    """``--hand`` names a robot plugin (the grasp planner imports no robot module) or a HandSpec file."""
+    from asmteach.core.errors import UserError
+    from asmteach.plugins.planners.grasps.commands import load_hand
+
+    nextage = load_hand("nextage")
+    assert nextage.model_dump_json() == load_hand("nextage_pybullet").model_dump_json()
+    assert nextage.name == "nextage_2f85" and nextage.max_width == pytest.approx(0.085)
+    with pytest.raises(UserError, match=r"neither a robot \(.*nextage_pybullet.*\) nor an existing HandSpec"):
+        load_hand(str(tmp_path / "no_such_hand.yaml"))
