@@ -15,11 +15,20 @@ Example (the Franka Panda that ships with ``pybullet_data``; the default setting
             finger_joints: [panda_finger_joint1, panda_finger_joint2]
             ...
 
-``urdf`` is a file path, or ``pybullet_data:<relative path>`` for robots that
-ship with PyBullet. The TCP link's frame must follow :class:`HandSpec`'s
-convention (z = approach out of the palm, y = jaw axis); ``hand`` describes
-the gripper geometry in that frame. World frame: z up, metres; the table top
-is at ``table_height`` (the base pose is independent of it).
+``urdf`` is a file path, ``pybullet_data:<relative path>`` for robots that
+ship with PyBullet, or ``example-robot-data:<relative path>`` (short ``erd:``)
+for the robots of the ``example-robot-data`` wheel; ``package://`` mesh URIs
+are resolved into a cached copy (:mod:`.compose`), the source is never edited.
+An arm without a gripper that opens gets a generated one (``gripper:``, see
+:mod:`.gripper`); a tool frame that is not the TCP gets ``tcp_offset:``; an
+arm with its own ``urdf`` is placed in the cell at its ``base`` (names in its
+settings are its URDF's names; the robot's joint and link names are then
+prefixed ``<arm>_``). See ``configs/demo_ur5.yaml``, ``demo_panda.yaml``, ``demo_dual_ur5.yaml``.
+
+The TCP frame must follow :class:`HandSpec`'s convention (z = approach out of
+the palm, y = jaw axis); ``hand`` describes the gripper geometry in that frame
+(default: the generated gripper's, else the Franka Hand). World frame: z up,
+metres; the table top is at ``table_height`` (the base pose is independent of it).
 """
 
 from __future__ import annotations
@@ -33,6 +42,9 @@ from asmteach.core.arm.robot import ArmRobot, ArmRobotSettings, ArmSpec
 from asmteach.core.arm.sim import GripperJoints
 from asmteach.core.errors import UserError
 from asmteach.core.models import HandSpec, Mat4, StrictModel
+from asmteach.core.urdf import resolve_urdf as resolve_packages
+from asmteach.plugins.robots.urdf_arm.compose import ArmSource, compose_urdf, package_paths, readable_source
+from asmteach.plugins.robots.urdf_arm.gripper import GripperConfig, gripper_names, hand_of
 
 __all__ = ["UrdfArm", "UrdfArmSettings", "resolve_urdf"]
 
@@ -40,19 +52,27 @@ PANDA_JOINTS = [f"panda_joint{k}" for k in range(1, 8)]
 
 
 def resolve_urdf(spec: str) -> Path:
-    """A URDF path; ``pybullet_data:<rel>`` is looked up in PyBullet's data folder."""
-    if spec.startswith("pybullet_data:"):
-        import pybullet_data
-
-        return Path(pybullet_data.getDataPath()) / spec.split(":", 1)[1]
-    return Path(spec).expanduser()
+    """A URDF file that pinocchio and PyBullet read: a path, ``pybullet_data:<rel>`` or
+    ``example-robot-data:<rel>`` (``package://`` URIs resolved into the URDF cache)."""
+    src = readable_source(spec)
+    if not src.is_file():
+        return src  # the readers name the missing file
+    return resolve_packages(src, package_paths(spec)).path
 
 
 class ArmConfig(StrictModel):
-    """One arm of the URDF and its gripper (names are URDF joint and link names)."""
+    """One arm and its gripper (names are joint and link names of the arm's URDF)."""
 
     joints: list[str] = Field(min_length=1, description="arm joints from the base to the wrist")
-    tcp_link: str = Field(description="link whose frame is the TCP (z approach, y jaw axis)")
+    tcp_link: str | None = Field(
+        None,
+        description="link whose frame is the TCP (z approach, y jaw axis); "
+        "with tcp_offset, the link the TCP is fixed to; not with gripper",
+    )
+    tcp_offset: Mat4 | None = Field(None, description="T_tcplink_tcp when tcp_link's frame is not the TCP")
+    gripper: GripperConfig | None = Field(None, description="generate a parallel gripper (it brings the TCP)")
+    urdf: str | None = Field(None, description="this arm's own URDF (path, pybullet_data:, example-robot-data:)")
+    base: Mat4 = Field(default_factory=lambda: np.eye(4), description="T_cellbase_root of the arm's own URDF")
     home: list[float] | None = Field(None, description="home configuration, radians; default: zeros clipped")
     finger_joints: list[str] = Field(default_factory=list, description="prismatic finger joints")
     finger_open: list[float] = Field(default_factory=list, description="finger joint values when open")
@@ -67,37 +87,121 @@ class ArmConfig(StrictModel):
             raise ValueError(f"finger_open and finger_closed need one value per finger joint ({n})")
         if self.home is not None and len(self.home) != len(self.joints):
             raise ValueError(f"home has {len(self.home)} values for {len(self.joints)} joints")
+        if self.gripper is not None and (self.tcp_link or self.tcp_offset is not None or n):
+            raise ValueError(
+                "a generated gripper brings its TCP and fingers: drop tcp_link, tcp_offset and "
+                "finger_* (hand_links may add arm links allowed to touch a held part)"
+            )
+        if self.gripper is None and not self.tcp_link:
+            raise ValueError("give tcp_link (or a gripper to generate)")
         return self
+
+    def spec(self, name: str) -> ArmSpec:
+        """The arm with names as in the composed URDF (``<name>_`` prefixed when it has its own URDF)."""
+        pre = f"{name}_" if self.urdf else ""
+        home = np.asarray(self.home, dtype=float) if self.home is not None else None
+        hand_links = [pre + ln for ln in self.hand_links]
+        if self.gripper is not None:
+            n = gripper_names(name)
+            fingers = list(n["fingers"])  # type: ignore[arg-type]
+            half = 0.5 * self.gripper.max_opening
+            g = GripperJoints(
+                list(n["finger_joints"]),
+                [half, half],
+                [0.0, 0.0],
+                str(n["tcp"]),  # type: ignore[arg-type]
+                fingers,
+            )
+            return ArmSpec(
+                [pre + j for j in self.joints], str(n["tcp"]), home, g, [*hand_links, str(n["body"]), *fingers]
+            )
+        tcp = f"{name}_tcp" if self.tcp_offset is not None else pre + str(self.tcp_link)
+        g = GripperJoints(
+            [pre + j for j in self.finger_joints],
+            list(self.finger_open),
+            list(self.finger_closed),
+            tcp,
+            [pre + ln for ln in self.finger_links],
+        )
+        return ArmSpec([pre + j for j in self.joints], tcp, home, g, hand_links)
+
+    def source(self, name: str) -> ArmSource:
+        return ArmSource(name, self.urdf, np.asarray(self.base, float), self.tcp_link, self.tcp_offset, self.gripper)
 
 
 def _panda_hand() -> HandSpec:
     # Franka Hand: 0-80 mm stroke; boxes measured from the pybullet_data meshes (TCP frame = panda_grasptarget).
-    return HandSpec(name="franka_hand", max_width=0.08, finger_size=[0.012, 0.02, 0.05], pad_size=(0.02, 0.018),
-                    palm_center=[0.0, 0.0, -0.075], palm_size=[0.06, 0.2, 0.06], max_force=70.0)
+    return HandSpec(
+        name="franka_hand",
+        max_width=0.08,
+        finger_size=[0.012, 0.02, 0.05],
+        pad_size=(0.02, 0.018),
+        palm_center=[0.0, 0.0, -0.075],
+        palm_size=[0.06, 0.2, 0.06],
+        max_force=70.0,
+    )
 
 
 class UrdfArmSettings(ArmRobotSettings):
-    """A URDF arm and its gripper, all from config (metres, radians)."""
+    """A URDF arm (or a cell of arms) and its gripper, all from config (metres, radians)."""
 
-    urdf: str = Field("pybullet_data:franka_panda/panda.urdf", description="path or pybullet_data:<rel>")
-    base_pose: Mat4 = Field(default_factory=lambda: np.eye(4), description="T_world_base of the URDF root")
+    urdf: str = Field(
+        "pybullet_data:franka_panda/panda.urdf",
+        description="path, pybullet_data:<rel> or example-robot-data:<rel>; '' when every arm has one",
+    )
+    base_pose: Mat4 = Field(default_factory=lambda: np.eye(4), description="T_world_base of the URDF (cell) root")
     arms: dict[str, ArmConfig] = Field(
-        default_factory=lambda: {"main": ArmConfig(
-            joints=PANDA_JOINTS, tcp_link="panda_grasptarget", home=[0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785],
-            finger_joints=["panda_finger_joint1", "panda_finger_joint2"], finger_open=[0.04, 0.04],
-            finger_closed=[0.0, 0.0], finger_links=["panda_leftfinger", "panda_rightfinger"],
-            hand_links=["panda_hand", "panda_leftfinger", "panda_rightfinger"])},
-        min_length=1)
-    hand: HandSpec = Field(default_factory=_panda_hand, description="gripper geometry in the TCP frame")
-    disabled_pairs: list[tuple[str, str]] = Field(default_factory=list, description="link pairs never checked")
+        default_factory=lambda: {
+            "main": ArmConfig(
+                joints=PANDA_JOINTS,
+                tcp_link="panda_grasptarget",
+                home=[0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785],
+                finger_joints=["panda_finger_joint1", "panda_finger_joint2"],
+                finger_open=[0.04, 0.04],
+                finger_closed=[0.0, 0.0],
+                finger_links=["panda_leftfinger", "panda_rightfinger"],
+                hand_links=["panda_hand", "panda_leftfinger", "panda_rightfinger"],
+            )
+        },
+        min_length=1,
+    )
+    hand: HandSpec | None = Field(
+        None, description="gripper geometry in the TCP frame; default: the generated gripper's, else the Franka Hand"
+    )
+    disabled_pairs: list[tuple[str, str]] = Field(
+        default_factory=list, description="link pairs never checked (names in the cell URDF)"
+    )
     disable_home_contacts: bool = Field(True, description="also never check link pairs touching at home")
+    convex_collision: bool = Field(
+        True,
+        description="plan with the convex hull of each STL collision mesh, the solid PyBullet collides "
+        "(a concave vendor link otherwise passes the planner's check and hits in the simulator)",
+    )
     table_center: tuple[float, float] = (0.5, 0.0)
     table_size: tuple[float, float] = (0.6, 0.8)
     table_height: float = 0.0
 
+    @model_validator(mode="after")
+    def _one_hand(self) -> UrdfArmSettings:
+        grippers = {a.gripper.model_dump_json() for a in self.arms.values() if a.gripper is not None}
+        if len(grippers) > 1 and self.hand is None:
+            raise ValueError("the arms' generated grippers differ: the robot has one hand, give the same gripper")
+        if not self.urdf and not all(a.urdf for a in self.arms.values()):
+            raise ValueError("urdf is empty: every arm then needs its own urdf")
+        return self
+
+    def the_hand(self) -> HandSpec:
+        """``hand``, else the generated gripper's (with ``grip_force``), else the Franka Hand."""
+        if self.hand is not None:
+            return self.hand
+        for a in self.arms.values():
+            if a.gripper is not None:
+                return hand_of(a.gripper, self.grip_force)
+        return _panda_hand()
+
 
 class UrdfArm(ArmRobot):
-    """Any URDF arm with a parallel gripper, configured from settings (default: Franka Panda)."""
+    """Any URDF arm (or cell of arms) with a parallel gripper, configured from settings (default: Franka Panda)."""
 
     Settings = UrdfArmSettings
     settings: UrdfArmSettings
@@ -105,13 +209,8 @@ class UrdfArm(ArmRobot):
     def __init__(self, settings: UrdfArmSettings | dict | None = None, *, seed: int = 0) -> None:
         super().__init__(settings, seed=seed)
         st = self.settings
-        urdf = resolve_urdf(st.urdf)
-        arms = {}
-        for name, a in st.arms.items():
-            home = np.asarray(a.home, dtype=float) if a.home is not None else None
-            g = GripperJoints(list(a.finger_joints), list(a.finger_open), list(a.finger_closed), a.tcp_link,
-                              list(a.finger_links))
-            arms[name] = ArmSpec(list(a.joints), a.tcp_link, home, g, list(a.hand_links))
+        urdf = compose_urdf(st.urdf, [a.source(n) for n, a in st.arms.items()], convex_collision=st.convex_collision)
+        arms = {n: a.spec(n) for n, a in st.arms.items()}
         # The home may be None until the kinematics know the limits: fill it in with zeros clipped to them.
         from asmteach.core.arm.kinematics import Kinematics
 
@@ -126,9 +225,21 @@ class UrdfArm(ArmRobot):
             for ln in [*s.gripper.finger_links, *s.hand_links]:
                 if ln not in known:
                     raise UserError(f"{urdf.name}: arm {n!r}: no link named {ln!r}")
-        self._setup(urdf, st.base_pose, arms, st.hand, list(st.disabled_pairs))
+        self._setup(urdf, st.base_pose, arms, st.the_hand(), list(st.disabled_pairs))
+        self._disable_rigid_pairs()
         if st.disable_home_contacts:
             self._disable_home_contacts()
+
+    def _disable_rigid_pairs(self) -> None:
+        """Links moved by the same joint (a gripper fixed to a flange fixed to the wrist) never move relative
+        to each other: their contact, if any, is part of the design. Vendor meshes often overlap a fraction of
+        a millimetre there, which the simulator's convex hulls see and the planner's exact meshes may not."""
+        geoms = [g for g in self.checker.robot if g.joint >= 0]
+        for i, a in enumerate(geoms):
+            for b in geoms[i + 1 :]:
+                if a.joint == b.joint and a.link != b.link:
+                    self.checker.disabled.add(frozenset((a.link, b.link)))
+        self.checker._pairs.clear()
 
     def _disable_home_contacts(self) -> None:
         """Like MoveIt's setup assistant: link pairs already touching at home are assumed designed to touch."""
