@@ -8,13 +8,13 @@ import numpy as np
 import trimesh
 
 from asmteach.core.corpus import _box, _cyl, _minus, _plus
-from asmteach.core.structure_corpus.markers import _face, _Site
+from asmteach.core.structure_corpus.markers import MarkerSite, face_site
 
-_GRASP_WIDTH_MAX = 0.070  # m; the gripper opens 85 mm
+GRASP_WIDTH_MAX = 0.070  # m; the gripper opens 85 mm
 
 
 # ---------------------------------------------------------------- shapes
-def _section(
+def section(
     kind: str,
     r: float,
     h: float,
@@ -49,12 +49,12 @@ def _section(
     return m
 
 
-def _reach(kind: str, r: float) -> float:
+def section_reach(kind: str, r: float) -> float:
     """Largest distance of a section's outline from its axis (metres)."""
     return {"round": r, "square": r * np.sqrt(2), "hex": r / np.cos(np.pi / 6), "d": r, "keyed": 1.4 * r}[kind]
 
 
-def _prism_x(profile_yz: np.ndarray, x0: float, x1: float) -> trimesh.Trimesh:
+def prism_x(profile_yz: np.ndarray, x0: float, x1: float) -> trimesh.Trimesh:
     """A convex prism along x from ``x0`` to ``x1`` of a convex (y, z) profile (metres)."""
     pts = [(x, y, z) for x in (x0, x1) for y, z in profile_yz]
     return trimesh.convex.convex_hull(np.asarray(pts, float))
@@ -62,7 +62,7 @@ def _prism_x(profile_yz: np.ndarray, x0: float, x1: float) -> trimesh.Trimesh:
 
 # ---------------------------------------------------------------- families
 @dataclass
-class _Build:
+class FamilyBuild:
     """A family's raw output, in A's build frame with B in its assembled place."""
 
     a: trimesh.Trimesh
@@ -70,8 +70,8 @@ class _Build:
     v_a: tuple[float, float, float]
     clearance: float
     play_axes: tuple[tuple[float, float, float], ...]
-    sites_a: list[_Site]
-    sites_b: list[_Site]
+    sites_a: list[MarkerSite]
+    sites_b: list[MarkerSite]
     name_a: str
     name_b: str
     description: str
@@ -79,12 +79,12 @@ class _Build:
     R_A_B: np.ndarray = field(default_factory=lambda: np.eye(3))  # B's own axes in A's frame
 
 
-def _clearance(rng: np.random.Generator) -> float:
+def draw_clearance(rng: np.random.Generator) -> float:
     # whole hundredths of a millimetre, as a drawing states a fit
     return round(float(rng.uniform(0.2, 1.0)), 2) * 1e-3
 
 
-def _block_sites(ax: float, ay: float, az: float, *, sides: str = "+x-x+y-y", z0: float = 0.0) -> list[_Site]:
+def block_sites(ax: float, ay: float, az: float, *, sides: str = "+x-x+y-y", z0: float = 0.0) -> list[MarkerSite]:
     """The vertical faces of a box centred on x = y = 0, from z = z0 to z0 + az (metres)."""
     out = []
     for s in ("+x", "-x", "+y", "-y"):
@@ -93,5 +93,5 @@ def _block_sites(ax: float, ay: float, az: float, *, sides: str = "+x-x+y-y", z0
         k = "xyz".index(s[1])
         value = (ax if k == 0 else ay) / 2 * (1 if s[0] == "+" else -1)
         w = ay if k == 0 else ax
-        out.append(_face(s, value, (-w / 2, z0), (w / 2, z0 + az)))
+        out.append(face_site(s, value, (-w / 2, z0), (w / 2, z0 + az)))
     return out

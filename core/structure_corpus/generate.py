@@ -11,11 +11,11 @@ import trimesh
 from asmteach.core import geometry
 from asmteach.core.corpus import _clean
 from asmteach.core.models import MarkerSpec
-from asmteach.core.structure_corpus.build import _Build
-from asmteach.core.structure_corpus.markers import _DICT_IDS, MARKER_DICTIONARY, _marker_pose, _pick_layout, _quiet_side
-from asmteach.core.structure_corpus.pegs import _d_peg, _hex_peg, _keyed_peg, _round_peg, _square_peg
-from asmteach.core.structure_corpus.pin_cap_bracket import _bracket_on_block, _cap_on_post, _side_pin
-from asmteach.core.structure_corpus.slides import _dovetail_slide, _t_slot_slide
+from asmteach.core.structure_corpus.build import FamilyBuild
+from asmteach.core.structure_corpus.markers import DICT_IDS, MARKER_DICTIONARY, marker_pose, pick_layout, quiet_side
+from asmteach.core.structure_corpus.pegs import d_peg, hex_peg, keyed_peg, round_peg, square_peg
+from asmteach.core.structure_corpus.pin_cap_bracket import bracket_on_block, cap_on_post, side_pin
+from asmteach.core.structure_corpus.slides import dovetail_slide, t_slot_slide
 
 
 @dataclass(frozen=True)
@@ -49,17 +49,17 @@ class GeneratedStructure:
     params: dict[str, float | str] = field(default_factory=dict)
 
 
-_FAMILIES: dict[str, Callable[[np.random.Generator], _Build]] = {
-    "round_peg": _round_peg,
-    "square_peg": _square_peg,
-    "hex_peg": _hex_peg,
-    "d_peg": _d_peg,
-    "keyed_peg": _keyed_peg,
-    "dovetail_slide": _dovetail_slide,
-    "t_slot_slide": _t_slot_slide,
-    "side_pin": _side_pin,
-    "cap_on_post": _cap_on_post,
-    "bracket_on_block": _bracket_on_block,
+_FAMILIES: dict[str, Callable[[np.random.Generator], FamilyBuild]] = {
+    "round_peg": round_peg,
+    "square_peg": square_peg,
+    "hex_peg": hex_peg,
+    "d_peg": d_peg,
+    "keyed_peg": keyed_peg,
+    "dovetail_slide": dovetail_slide,
+    "t_slot_slide": t_slot_slide,
+    "side_pin": side_pin,
+    "cap_on_post": cap_on_post,
+    "bracket_on_block": bracket_on_block,
 }
 STRUCTURE_FAMILIES: tuple[str, ...] = tuple(_FAMILIES)
 """Every structure family, in corpus order."""
@@ -71,7 +71,7 @@ def _bottom_centre(mesh: trimesh.Trimesh) -> np.ndarray:
     return np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])
 
 
-def _finish(build: _Build, name: str, family: str, rng: np.random.Generator) -> GeneratedStructure:
+def _finish(build: FamilyBuild, name: str, family: str, rng: np.random.Generator) -> GeneratedStructure:
     """Put each part in its own frame (bounding-box bottom centre, z up), place markers, draw densities."""
     a = _clean(build.a, f"{name} A")
     b_asm = _clean(build.b, f"{name} B")
@@ -86,12 +86,10 @@ def _finish(build: _Build, name: str, family: str, rng: np.random.Generator) -> 
     T_build_B = geometry.from_rotation(R, R @ o_b)  # B's part frame in the build frame
     T_A_B = T_Aframe_build @ T_build_B
     T_B_build = geometry.invert(T_build_B)
-    layout_a, layout_b = _pick_layout(rng, build.sites_a, build.sites_b)
-    ids = [int(i) for i in rng.permutation(_DICT_IDS)[: len(layout_a) + len(layout_b)]]
+    layout_a, layout_b = pick_layout(rng, build.sites_a, build.sites_b)
+    ids = [int(i) for i in rng.permutation(DICT_IDS)[: len(layout_a) + len(layout_b)]]
     markers_a = [
-        MarkerSpec(
-            dictionary=MARKER_DICTIONARY, id=ids[i], size=size, T_part_marker=T_Aframe_build @ _marker_pose(site)
-        )
+        MarkerSpec(dictionary=MARKER_DICTIONARY, id=ids[i], size=size, T_part_marker=T_Aframe_build @ marker_pose(site))
         for i, (site, size) in enumerate(layout_a)
     ]
     markers_b = [
@@ -99,7 +97,7 @@ def _finish(build: _Build, name: str, family: str, rng: np.random.Generator) -> 
             dictionary=MARKER_DICTIONARY,
             id=ids[len(layout_a) + i],
             size=size,
-            T_part_marker=T_B_build @ _marker_pose(site),
+            T_part_marker=T_B_build @ marker_pose(site),
         )
         for i, (site, size) in enumerate(layout_b)
     ]
@@ -170,7 +168,7 @@ def marker_problems(gs: GeneratedStructure, tol: float = 5e-5) -> list[str]:
         for m in markers:
             M = T @ m.T_part_marker
             n = M[:3, 2]
-            h = _quiet_side(m.size) / 2 - 2e-4
+            h = quiet_side(m.size) / 2 - 2e-4
             g = np.array([(u, v, 0.0) for u in (-h, 0, h) for v in (-h, 0, h)])
             pts = g @ M[:3, :3].T + M[:3, 3]
             down = own.ray.intersects_location(pts + 5e-4 * n, np.tile(-n, (len(pts), 1)), multiple_hits=False)

@@ -13,7 +13,7 @@ import numpy as np
 from asmteach.core import geometry
 
 MARKER_DICTIONARY = "DICT_4X4_50"
-_DICT_IDS = 50
+DICT_IDS = 50
 _MARKER_CELLS = 6  # a 4x4 marker: 4 data cells and a one-cell black border on each side
 _QUIET_CELLS = 1.0  # white margin the renderer draws around a marker (render.RenderObject.quiet_zone_cells)
 _EDGE_MARGIN = 0.001  # m kept between a marker's quiet zone and the face's edge
@@ -22,14 +22,14 @@ _MARKER_MAX = 0.035
 _UP = np.array([0.0, 0.0, 1.0])
 
 
-def _quiet_side(size: float) -> float:
+def quiet_side(size: float) -> float:
     """Side of a marker's square with its quiet zone, metres."""
     return size * (1.0 + 2.0 * _QUIET_CELLS / _MARKER_CELLS)
 
 
 # ---------------------------------------------------------------- marker sites
 @dataclass(frozen=True)
-class _Site:
+class MarkerSite:
     """A rectangle on a flat outer face, in the assembled frame (A's build frame), where a marker may go."""
 
     center: tuple[float, float, float]
@@ -42,7 +42,7 @@ class _Site:
         return room / (1.0 + 2.0 * _QUIET_CELLS / _MARKER_CELLS)
 
 
-def _face(axis: str, value: float, lo: tuple[float, float], hi: tuple[float, float]) -> _Site:
+def face_site(axis: str, value: float, lo: tuple[float, float], hi: tuple[float, float]) -> MarkerSite:
     """A rectangle on the plane ``<axis> = value`` with outward normal ``sign(axis)`` (metres).
 
     ``axis`` is one of ``+x -x +y -y +z -z``; ``lo``/``hi`` bound the other two
@@ -55,10 +55,10 @@ def _face(axis: str, value: float, lo: tuple[float, float], hi: tuple[float, flo
     centre[k] = value
     for j, i in enumerate(i for i in range(3) if i != k):
         centre[i] = 0.5 * (lo[j] + hi[j])
-    return _Site(tuple(centre), tuple(normal), (0.5 * (hi[0] - lo[0]), 0.5 * (hi[1] - lo[1])))
+    return MarkerSite(tuple(centre), tuple(normal), (0.5 * (hi[0] - lo[0]), 0.5 * (hi[1] - lo[1])))
 
 
-def _marker_pose(site: _Site) -> np.ndarray:
+def marker_pose(site: MarkerSite) -> np.ndarray:
     """Marker frame on a site: z out of the face; on a vertical face y up, on a horizontal one x along +x."""
     z = np.asarray(site.normal, float)
     if abs(z[2]) > 0.9:
@@ -70,9 +70,9 @@ def _marker_pose(site: _Site) -> np.ndarray:
     return geometry.from_rotation(np.column_stack([x, y, z]), site.center)
 
 
-def _pick_layout(
-    rng: np.random.Generator, sites_a: list[_Site], sites_b: list[_Site]
-) -> tuple[list[tuple[_Site, float]], list[tuple[_Site, float]]]:
+def pick_layout(
+    rng: np.random.Generator, sites_a: list[MarkerSite], sites_b: list[MarkerSite]
+) -> tuple[list[tuple[MarkerSite, float]], list[tuple[MarkerSite, float]]]:
     """1-4 sites per part with a marker size each; one A marker and one B marker face within 90 deg."""
     usable_a = [s for s in sites_a if s.max_marker() >= _MARKER_MIN]
     usable_b = [s for s in sites_b if s.max_marker() >= _MARKER_MIN]
@@ -89,7 +89,7 @@ def _pick_layout(
         raise RuntimeError("no face of B is seen together with a face of A")  # a generator defect
     first_a, first_b = pairs[int(rng.integers(len(pairs)))]
 
-    def fill(usable: list[_Site], first: int) -> list[_Site]:
+    def fill(usable: list[MarkerSite], first: int) -> list[MarkerSite]:
         n = min(int(rng.integers(1, 5)), len(usable))
         rest = [i for i in range(len(usable)) if i != first]
         more = [rest[k] for k in rng.choice(len(rest), size=n - 1, replace=False)] if n > 1 else []
@@ -97,7 +97,7 @@ def _pick_layout(
 
     chosen_a, chosen_b = fill(usable_a, first_a), fill(usable_b, first_b)
 
-    def sized(s: _Site) -> tuple[_Site, float]:
+    def sized(s: MarkerSite) -> tuple[MarkerSite, float]:
         hi = min(s.max_marker(), _MARKER_MAX)
         # Markers are cut from printed sheets: a size in whole half-millimetres.
         size = np.floor(float(rng.uniform(max(_MARKER_MIN, 0.6 * hi), hi)) * 2000.0) / 2000.0

@@ -6,62 +6,62 @@ import numpy as np
 
 from asmteach.core.corpus import _box, _cyl, _minus, _plus, _u
 from asmteach.core.structure_corpus.build import (
-    _GRASP_WIDTH_MAX,
-    _block_sites,
-    _Build,
-    _clearance,
-    _reach,
-    _section,
+    GRASP_WIDTH_MAX,
+    FamilyBuild,
+    block_sites,
+    draw_clearance,
+    section,
+    section_reach,
 )
-from asmteach.core.structure_corpus.markers import _face
+from asmteach.core.structure_corpus.markers import face_site
 
 
-def _peg(rng: np.random.Generator, kind: str) -> _Build:
-    c = _clearance(rng)
+def _peg(rng: np.random.Generator, kind: str) -> FamilyBuild:
+    c = draw_clearance(rng)
     r = _u(rng, 5, 12)
     flat = r * float(rng.uniform(0.5, 0.75)) if kind == "d" else 0.0
     key = r * float(rng.uniform(0.5, 0.8)) if kind == "keyed" else 0.0
-    reach = _reach(kind, r)
+    reach = section_reach(kind, r)
     side_min = 2 * reach + 2 * c + 16e-3  # 3 mm of wall at least and room for a head 4 mm inside the top face
     ax = max(side_min, _u(rng, 30, 90))
-    ay = min(max(side_min, _u(rng, 25, 70)), _GRASP_WIDTH_MAX)
+    ay = min(max(side_min, _u(rng, 25, 70)), GRASP_WIDTH_MAX)
     az = _u(rng, 17, 50)  # its sides hold a 10 mm marker
     through = bool(rng.random() < 0.5)
     if through:
         length = az * float(rng.uniform(0.5, 0.9))  # the shank never reaches the table under A
-        hole = _section(kind, r, 2 * az + 0.01, c, (0, 0, az / 2), key, flat)
+        hole = section(kind, r, 2 * az + 0.01, c, (0, 0, az / 2), key, flat)
     else:
         depth = min(az * float(rng.uniform(0.45, 0.85)), az - 3e-3)
         length = depth - 1e-3  # 1 mm under the shank's tip: the head's shoulder is the seat
-        hole = _section(kind, r, 2 * depth, c, (0, 0, az), key, flat)
+        hole = section(kind, r, 2 * depth, c, (0, 0, az), key, flat)
     a = _minus(_box((ax, ay, az), (0, 0, az / 2)), hole)
     head_w = _u(rng, max(2 * reach * 1e3 + 8, 20), min(ax, ay) * 1e3 - 4)  # B is 20 mm across at least
     head_h = _u(rng, 10, 28)
     round_head = kind in ("round", "hex") and bool(rng.random() < 0.4)
-    shank = _section(kind, r, length, 0.0, (0, 0, az - length / 2), key, flat)
+    shank = section(kind, r, length, 0.0, (0, 0, az - length / 2), key, flat)
     if round_head:
         head = _cyl(head_w / 2, head_h, (0, 0, az + head_h / 2))
     else:
         head = _box((head_w, head_w, head_h), (0, 0, az + head_h / 2))
     b = _plus(shank, head)
-    sites_a = _block_sites(ax, ay, az)
+    sites_a = block_sites(ax, ay, az)
     fx = head_w / 2 + 2e-3  # top-face strips keep 2 mm off the head's footprint
     sites_a += [
-        _face("+z", az, (fx, -ay / 2), (ax / 2, ay / 2)),
-        _face("+z", az, (-ax / 2, -ay / 2), (-fx, ay / 2)),
-        _face("+z", az, (-fx, fx), (fx, ay / 2)),
-        _face("+z", az, (-fx, -ay / 2), (fx, -fx)),
+        face_site("+z", az, (fx, -ay / 2), (ax / 2, ay / 2)),
+        face_site("+z", az, (-ax / 2, -ay / 2), (-fx, ay / 2)),
+        face_site("+z", az, (-fx, fx), (fx, ay / 2)),
+        face_site("+z", az, (-fx, -ay / 2), (fx, -fx)),
     ]
     top = az + head_h
-    sites_b = [_face("+z", top, (-head_w / 2, -head_w / 2), (head_w / 2, head_w / 2))]
+    sites_b = [face_site("+z", top, (-head_w / 2, -head_w / 2), (head_w / 2, head_w / 2))]
     if round_head:
         # the inscribed square of the round top
         s = head_w / np.sqrt(2)
-        sites_b = [_face("+z", top, (-s / 2, -s / 2), (s / 2, s / 2))]
+        sites_b = [face_site("+z", top, (-s / 2, -s / 2), (s / 2, s / 2))]
     else:
-        sites_b += _block_sites(head_w, head_w, head_h, z0=az)
+        sites_b += block_sites(head_w, head_w, head_h, z0=az)
     noun = {"round": "round", "square": "square", "hex": "hexagonal", "d": "D-section", "keyed": "keyed"}[kind]
-    return _Build(
+    return FamilyBuild(
         # a hexagon's flats face +-y; across its corners (x) the play is c / cos 30 deg
         a,
         b,
@@ -83,21 +83,21 @@ def _peg(rng: np.random.Generator, kind: str) -> _Build:
     )
 
 
-def _round_peg(rng: np.random.Generator) -> _Build:
+def round_peg(rng: np.random.Generator) -> FamilyBuild:
     return _peg(rng, "round")
 
 
-def _square_peg(rng: np.random.Generator) -> _Build:
+def square_peg(rng: np.random.Generator) -> FamilyBuild:
     return _peg(rng, "square")
 
 
-def _hex_peg(rng: np.random.Generator) -> _Build:
+def hex_peg(rng: np.random.Generator) -> FamilyBuild:
     return _peg(rng, "hex")
 
 
-def _d_peg(rng: np.random.Generator) -> _Build:
+def d_peg(rng: np.random.Generator) -> FamilyBuild:
     return _peg(rng, "d")
 
 
-def _keyed_peg(rng: np.random.Generator) -> _Build:
+def keyed_peg(rng: np.random.Generator) -> FamilyBuild:
     return _peg(rng, "keyed")

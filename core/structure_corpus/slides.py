@@ -6,37 +6,40 @@ import numpy as np
 
 from asmteach.core.corpus import _box, _minus, _plus, _u
 from asmteach.core.structure_corpus.build import (
-    _GRASP_WIDTH_MAX,
-    _block_sites,
-    _Build,
-    _clearance,
-    _prism_x,
+    GRASP_WIDTH_MAX,
+    FamilyBuild,
+    block_sites,
+    draw_clearance,
+    prism_x,
 )
-from asmteach.core.structure_corpus.markers import _face, _Site
+from asmteach.core.structure_corpus.markers import MarkerSite, face_site
 
 
 def _slide_frame(rng: np.random.Generator, slot_w: float, slot_h: float) -> tuple[float, float, float, float, bool]:
     """A's length, width and height, the stop wall (0 for a through slot) and whether it is stopped (metres)."""
     la = _u(rng, 45, 100)
     wall = _u(rng, 6, 16)
-    ay = min(slot_w + 2 * wall, _GRASP_WIDTH_MAX)
+    ay = min(slot_w + 2 * wall, GRASP_WIDTH_MAX)
     az = max(slot_h + _u(rng, 5, 16), 17e-3)  # its sides hold a 10 mm marker
     stopped = bool(rng.random() < 0.5)
     stop = _u(rng, 5, 10) if stopped else 0.0
     return la, ay, az, stop, stopped
 
 
-def _slide_sites(la: float, ay: float, az: float, mouth: float, stopped: bool) -> list[_Site]:
-    sites = _block_sites(la, ay, az, sides="+y-y")
+def _slide_sites(la: float, ay: float, az: float, mouth: float, stopped: bool) -> list[MarkerSite]:
+    sites = block_sites(la, ay, az, sides="+y-y")
     if stopped:
-        sites += _block_sites(la, ay, az, sides="-x")
+        sites += block_sites(la, ay, az, sides="-x")
     edge = mouth / 2 + 1e-3
-    sites += [_face("+z", az, (-la / 2, edge), (la / 2, ay / 2)), _face("+z", az, (-la / 2, -ay / 2), (la / 2, -edge))]
+    sites += [
+        face_site("+z", az, (-la / 2, edge), (la / 2, ay / 2)),
+        face_site("+z", az, (-la / 2, -ay / 2), (la / 2, -edge)),
+    ]
     return sites
 
 
-def _dovetail_slide(rng: np.random.Generator) -> _Build:
-    c = _clearance(rng)
+def dovetail_slide(rng: np.random.Generator) -> FamilyBuild:
+    c = draw_clearance(rng)
     d = _u(rng, 6, 14)  # groove depth
     alpha = np.radians(float(rng.uniform(15, 30)))  # flank angle from the vertical
     narrow = _u(rng, 12, 30)  # slider width at A's top face
@@ -47,7 +50,7 @@ def _dovetail_slide(rng: np.random.Generator) -> _Build:
     # The groove is the slider's profile moved out by c on each side: B's sideways play is c.
     # The flanks run on 1 mm above A's top at the same slope, so the cut leaves no sliver there.
     top_half = narrow / 2 + c - 1e-3 * np.tan(alpha)
-    groove = _prism_x(
+    groove = prism_x(
         np.array([[-(wide / 2 + c), floor], [wide / 2 + c, floor], [top_half, az + 1e-3], [-top_half, az + 1e-3]]),
         -la / 2 + stop,
         la / 2 + 1e-2,
@@ -56,17 +59,17 @@ def _dovetail_slide(rng: np.random.Generator) -> _Build:
     lb = max(20e-3, (la - stop) * float(rng.uniform(0.45, 0.85)))
     x0 = -la / 2 + stop if stopped else -lb / 2  # stopped: B's front touches the stop wall
     neck_h = _u(rng, 16, 28)  # its sides above A hold a 10 mm marker
-    body = _prism_x(np.array([[-wide / 2, floor], [wide / 2, floor], [narrow / 2, az], [-narrow / 2, az]]), x0, x0 + lb)
+    body = prism_x(np.array([[-wide / 2, floor], [wide / 2, floor], [narrow / 2, az], [-narrow / 2, az]]), x0, x0 + lb)
     neck = _box((lb, narrow, neck_h), (x0 + lb / 2, 0, az + neck_h / 2))
     b = _plus(body, neck)
     top = az + neck_h
     sites_b = [
-        _face("+z", top, (x0, -narrow / 2), (x0 + lb, narrow / 2)),
-        _face("+y", narrow / 2, (x0, az), (x0 + lb, top)),
-        _face("-y", -narrow / 2, (x0, az), (x0 + lb, top)),
-        _face("+x", x0 + lb, (-narrow / 2, az), (narrow / 2, top)),
+        face_site("+z", top, (x0, -narrow / 2), (x0 + lb, narrow / 2)),
+        face_site("+y", narrow / 2, (x0, az), (x0 + lb, top)),
+        face_site("-y", -narrow / 2, (x0, az), (x0 + lb, top)),
+        face_site("+x", x0 + lb, (-narrow / 2, az), (narrow / 2, top)),
     ]
-    return _Build(
+    return FamilyBuild(
         a,
         b,
         (-1.0, 0.0, 0.0),
@@ -88,8 +91,8 @@ def _dovetail_slide(rng: np.random.Generator) -> _Build:
     )
 
 
-def _t_slot_slide(rng: np.random.Generator) -> _Build:
-    c = _clearance(rng)
+def t_slot_slide(rng: np.random.Generator) -> FamilyBuild:
+    c = draw_clearance(rng)
     wf = _u(rng, 16, 36)  # flange width
     hf = _u(rng, 5, 10)  # flange height
     wr = max(8e-3, wf * float(rng.uniform(0.35, 0.6)))  # rib width
@@ -97,7 +100,7 @@ def _t_slot_slide(rng: np.random.Generator) -> _Build:
     fl = max(_u(rng, 4, 12), 17e-3 - (hf + c + lip))  # A's floor; A's sides hold a 10 mm marker
     az = fl + hf + c + lip
     la = _u(rng, 45, 100)
-    ay = min(wf + 2 * c + 2 * _u(rng, 6, 16), _GRASP_WIDTH_MAX)
+    ay = min(wf + 2 * c + 2 * _u(rng, 6, 16), GRASP_WIDTH_MAX)
     stopped = bool(rng.random() < 0.5)
     stop = _u(rng, 5, 10) if stopped else 0.0
     x_in, x_out = -la / 2 + stop, la / 2 + 1e-2
@@ -112,12 +115,12 @@ def _t_slot_slide(rng: np.random.Generator) -> _Build:
     rib = _box((lb, wr, top - (fl + hf)), (x0 + lb / 2, 0, (fl + hf + top) / 2))
     b = _plus(flange, rib)
     sites_b = [
-        _face("+z", top, (x0, -wr / 2), (x0 + lb, wr / 2)),
-        _face("+y", wr / 2, (x0, az), (x0 + lb, top)),
-        _face("-y", -wr / 2, (x0, az), (x0 + lb, top)),
-        _face("+x", x0 + lb, (-wr / 2, az), (wr / 2, top)),
+        face_site("+z", top, (x0, -wr / 2), (x0 + lb, wr / 2)),
+        face_site("+y", wr / 2, (x0, az), (x0 + lb, top)),
+        face_site("-y", -wr / 2, (x0, az), (x0 + lb, top)),
+        face_site("+x", x0 + lb, (-wr / 2, az), (wr / 2, top)),
     ]
-    return _Build(
+    return FamilyBuild(
         a,
         b,
         (-1.0, 0.0, 0.0),
