@@ -12,6 +12,7 @@ Every error is one line giving the key path and the reason, e.g.
 
 from __future__ import annotations
 
+import copy
 import math
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -31,6 +32,7 @@ __all__ = [
     "SceneSettings",
     "TableSettings",
     "check_finite",
+    "check_overrides",
     "format_validation_error",
     "load_run_config",
     "validate_demo",
@@ -333,14 +335,43 @@ def load_run_config(
     raw = read_yaml(p)
     if not isinstance(raw, dict):
         raise UserError(f"{p}: a config must be a YAML mapping at the top level")
+    try:
+        cfg = _validate_run_config(raw, overrides, check_plugins=check_plugins)
+    except UserError as exc:
+        raise UserError(f"{p}: {exc}") from None
+    cfg.base_dir = p.resolve().parent
+    if check_plugins:
+        structure = cfg.path(cfg.structure)
+        if not structure.is_file():
+            raise UserError(f"{p}: structure: no such file {structure}")
+    return cfg
+
+
+def check_overrides(overrides: dict[str, Any], *, where: str = "params.overrides") -> None:
+    """Dotted run-config keys (as ``asmteach run --set``) checked against every section, before any run.
+
+    For an experiment whose run configs are made per trial: the keys are set
+    on a config of the default plugins (or those the overrides choose), so a
+    misspelt key, in any section or plugin's settings, fails here in one line
+    naming ``where``.
+    """
+    try:
+        defaults = RunConfig(structure="checked later.yaml").model_dump(mode="json", include=set(ROLE_OF_KEY))
+        _validate_run_config({"structure": "checked later.yaml", **defaults}, overrides, check_plugins=True)
+    except UserError as exc:
+        raise UserError(f"{where}: {exc}") from None
+
+
+def _validate_run_config(raw: dict[str, Any], overrides: dict[str, Any] | None, *, check_plugins: bool) -> RunConfig:
+    """``raw`` with ``overrides`` set, as a :class:`RunConfig`; with ``check_plugins`` each plugin's settings too."""
+    raw = copy.deepcopy(raw)
     for key, value in (overrides or {}).items():
         set_dotted(raw, key, value)
-    check_finite(raw, str(p))
+    check_finite(raw)
     try:
         cfg = RunConfig.model_validate(raw)
     except ValidationError as exc:
-        raise UserError(f"{p}: {format_validation_error(exc)}") from None
-    cfg.base_dir = p.resolve().parent
+        raise UserError(format_validation_error(exc)) from None
     if check_plugins:
         from asmteach.core import registry
 
@@ -351,16 +382,10 @@ def load_run_config(
             try:
                 cls = registry.get_class(role, choice.plugin)
             except UserError as exc:
-                raise UserError(f"{p}: {key}.plugin: {exc}") from None
-            try:
-                validate_settings(cls, choice.settings, where=f"{key}.settings")
-                if key == "teacher":
-                    validate_demo(cls, choice.plugin, cfg.demo)
-            except UserError as exc:
-                raise UserError(f"{p}: {exc}") from None
-        structure = cfg.path(cfg.structure)
-        if not structure.is_file():
-            raise UserError(f"{p}: structure: no such file {structure}")
+                raise UserError(f"{key}.plugin: {exc}") from None
+            validate_settings(cls, choice.settings, where=f"{key}.settings")
+            if key == "teacher":
+                validate_demo(cls, choice.plugin, cfg.demo)
     return cfg
 
 

@@ -40,6 +40,10 @@ class EndToEnd(Experiment):
     plot_metrics = ("success", "achieved_vs_taught_mm", "achieved_vs_taught_deg", "a_goal_error_mm",
                     "plan_seconds", "robot_seconds")  # six at most: the computer's planning clock, the robot's clock
 
+    def check(self, params: EndToEndParams) -> None:
+        """The run config with the overrides, loaded as a trial loads it: a misspelt key fails before any trial."""
+        load_run_config(self.path(params.run_config), overrides=params.overrides)
+
     def run_trial(self, params: EndToEndParams, seed: int, workdir: Path) -> dict[str, Any]:
         _, row = run_config_trial(self.path(params.run_config), params.overrides, seed, workdir)
         return row

@@ -32,6 +32,7 @@ from typing import Any
 
 from pydantic import Field
 
+from asmteach.core.config import check_overrides
 from asmteach.core.errors import UserError
 from asmteach.core.io import write_text
 from asmteach.core.models import StrictModel
@@ -143,6 +144,7 @@ class StructuresCorpus(Experiment):
         if params.family not in STRUCTURE_FAMILIES:
             raise UserError(f"params.family: no structure family {params.family!r}; families: "
                             f"{', '.join(STRUCTURE_FAMILIES)}")
+        check_overrides(params.overrides)  # each trial's run config is made later: its keys are checked now
 
     def run_trial(self, params: StructuresCorpusParams, seed: int, workdir: Path) -> dict[str, Any]:
         from asmteach.core.end_to_end import run_config_trial

@@ -391,7 +391,7 @@ CASES: list[Case] = [
          r"hand\.yaml: max_width: not a finite number"),
     Case("grasps-hand-missing", "grasps --hand names no file",
          lambda t: ["grasps", str(box_stl(t)), "--out", str(t / "g.json"), "--hand", "gripper.yaml"], 2,
-         r"neither 'nextage'"),
+         r"'gripper\.yaml' is neither a robot"),
     Case("grasps-seed-negative", "grasps --seed -1",
          lambda t: ["grasps", str(box_stl(t)), "--out", str(t / "g.json"), "--seed", "-1"], 2, r"--seed"),
     Case("grasps-mu-nan", "grasps --mu nan",

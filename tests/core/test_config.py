@@ -1,5 +1,6 @@
 """Config validation: each error is one line with the key path and the reason."""
 
+import re
 import textwrap
 from pathlib import Path
 
@@ -12,6 +13,7 @@ from asmteach.core.config import (
     ROLE_OF_KEY,
     PluginChoice,
     RunConfig,
+    check_overrides,
     load_run_config,
     set_dotted,
 )
@@ -149,3 +151,25 @@ def test_every_setting_of_the_run_config_is_described() -> None:
     """``plugins --settings`` shows a description for each key of the run config's own sections."""
     undescribed = [key for key, _, _, text in describe_settings(RunConfig) if not text]
     assert not undescribed, undescribed
+
+
+def test_check_overrides_names_a_misspelt_key_in_any_section() -> None:
+    check_overrides({"execution.animation": False, "robot.settings.start_tolerance": 0.1})
+    for key in ("execution.animaton", "robot.settings.start_tolerence", "table.hieght", "demo.framez"):
+        with pytest.raises(UserError, match=rf"^params\.overrides: {re.escape(key)}: unknown key"):
+            check_overrides({key: 1})
+
+
+@pytest.mark.parametrize(
+    "experiment",
+    [
+        f"experiment: end_to_end\nparams: {{run_config: {DEMO}, overrides: {{execution.animaton: false}}}}\n",
+        "experiment: structures_corpus\nparams: {family: hex_peg, overrides: {execution.animaton: false}}\n",
+    ],
+    ids=["end_to_end", "structures_corpus"],
+)
+def test_validate_checks_an_experiments_run_config_overrides(experiment, tmp_path, capsys) -> None:
+    path = tmp_path / "exp.yaml"
+    path.write_text(experiment)
+    assert main(["validate", str(path)]) == 2
+    assert "execution.animaton: unknown key" in capsys.readouterr().err
