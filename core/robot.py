@@ -16,6 +16,13 @@ The config's ``robot:`` section builds one :class:`~asmteach.core.interfaces.Rob
 which is a :class:`RobotModel` carrying its current :class:`PlanningScene`; a
 robot the pipeline can run is also a :class:`World`.
 
+A planner works on scene values and hands back the one it ends with::
+
+    scene = robot.scene.with_obstacles(others)           # the world as planning starts
+    free = ~scene.in_collision(arm, path)                # (n,) bool for an (n, dof) path
+    carrying = scene.with_attached(arm, part, T_tcp_part, width=grasp.width)
+    waiting = carrying.with_configuration(other_arm, q_other)   # the other arm parked there
+
 Frames and units: world frame z up, metres, radians. ``T_world_tcp`` is the
 TCP pose following :class:`~asmteach.core.models.HandSpec` (z = approach out of
 the palm, y = jaw axis). An arm's configuration is a ``(dof,)`` array of joint

@@ -6,18 +6,13 @@ import numpy as np
 import pybullet
 import pytest
 
-from asmteach.core.arm.plan_check import (
-    CheckedArm,
-    PlanCheck,
-    PlanChecker,
-    densify_by_reach,
-    recheck_plan,
-)
+from asmteach.core.arm.plan_check import CheckedArm, PlanCheck, densify_by_reach
+from asmteach.core.arm.plan_checker import PlanChecker, recheck_plan
 from asmteach.core.arm.sim import PyBulletWorld
 from asmteach.core.errors import UserError
 from asmteach.core.models import GripperEvent, PartSpec, Plan, PlanSegment, Primitive, SolidSpec, TablePlane, Trajectory
 from asmteach.core.parts import build_part
-from asmteach.plugins.planners.regrasp.assembly import cartesian_path
+from asmteach.plugins.planners.regrasp.realise import cartesian_path
 from asmteach.plugins.robots.nextage.robot import NextagePyBullet
 
 TABLE = TablePlane(height=0.0)
