@@ -157,6 +157,13 @@ class PlanningScene(abc.ABC):
         """Arm name -> the part its hand holds (arms holding nothing are absent)."""
         return MappingProxyType(self._attached)
 
+    @property
+    def table(self) -> Obstacle | None:
+        """The table this scene checks against, as an obstacle named ``"table"`` (a box whose top face is the
+        table top, world frame), for planners that check their own geometry against it; ``None`` when the
+        robot models no table."""
+        return None
+
     def with_configuration(self, arm: str, q: np.ndarray) -> Self:
         """This scene with ``arm`` at ``q`` ``(dof,)`` radians."""
         new = copy.copy(self)

@@ -31,7 +31,7 @@ from asmteach.core.arm.plan_checker import recheck_plan
 from asmteach.core.arm.scene import ArmScene, SceneBinding
 from asmteach.core.arm.sim import POSITION_GAIN, GripperJoints, PyBulletWorld
 from asmteach.core.errors import UserError
-from asmteach.core.interfaces import IKResult, PartModel, Robot
+from asmteach.core.interfaces import IKResult, Obstacle, PartModel, Robot
 from asmteach.core.models import HandSpec, Plan, StrictModel, TablePlane, Trajectory
 from asmteach.core.robot import World
 
@@ -121,7 +121,14 @@ class ArmRobot(Robot, World):
             self.kin.set_arm(a, s.home)
             self._set_fingers(a, s.gripper.open_values)
         self._world_q = {a: s.home.copy() for a, s in arms.items()}
-        self.scene = ArmScene(self._binding, self._world_q)
+        self.scene = ArmScene(self._binding, self._world_q, table=self._table_obstacle(st.table_height))
+
+    def _table_obstacle(self, height: float, thickness: float = 0.05) -> Obstacle:
+        """The table as the checker models it: a ``thickness`` slab whose top face is at ``height`` (metres)."""
+        st = self.settings
+        T = np.eye(4)
+        T[:3, 3] = [st.table_center[0], st.table_center[1], height - 0.5 * thickness]
+        return Obstacle("table", trimesh.creation.box(extents=[st.table_size[0], st.table_size[1], thickness]), T)
 
     def _set_fingers(self, arm: str, values: Sequence[float]) -> None:
         self._binding.set_fingers(arm, values)
@@ -210,7 +217,7 @@ class ArmRobot(Robot, World):
         self.checker.set_table(st.table_center, st.table_size, table.height)
         self._binding.invalidate()
         self._world_q = {a: s.home.copy() for a, s in self._arms.items()}
-        self.scene = ArmScene(self._binding, self._world_q)
+        self.scene = ArmScene(self._binding, self._world_q, table=self._table_obstacle(table.height))
         self.sim.reset_world(st.table_center, st.table_size, table.height, parts)
         for s in self._arms.values():
             self.sim.set_joints(s.joints, s.home)

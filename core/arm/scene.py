@@ -85,9 +85,16 @@ class ArmScene(PlanningScene):
         configuration: Mapping[str, np.ndarray],
         obstacles: Sequence[Obstacle] = (),
         attached: Mapping[str, Attachment] | None = None,
+        *,
+        table: Obstacle | None = None,
     ) -> None:
         super().__init__(configuration, obstacles, attached)
         self._binding = binding
+        self._table = table
+
+    @property
+    def table(self) -> Obstacle | None:
+        return self._table
 
     def in_collision(self, arm: str, qs: np.ndarray, *, ignore: Sequence[str] = ()) -> np.ndarray:
         return self._binding.checker_at(self, arm).in_collision(arm, qs, ignore=ignore)

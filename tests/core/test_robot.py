@@ -83,6 +83,7 @@ def test_with_methods_return_new_scenes_and_leave_the_old_one_alone() -> None:
     moved = holding.with_configuration("main", near[0])
     assert type(moved) is BallScene
     assert empty.obstacles == () and not empty.attached and np.array_equal(empty.configuration["main"], np.zeros(3))
+    assert empty.table is None  # the default: a scene without a table of its own
     assert walled.attached == {} and holding.attached["main"].width == 0.05
     np.testing.assert_array_equal(moved.configuration["main"], near[0])
     assert not walled.in_collision("main", near)[0] and holding.in_collision("main", near)[0]

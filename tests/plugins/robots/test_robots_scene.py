@@ -49,6 +49,21 @@ def test_the_other_arm_is_where_the_scene_puts_it(robot: NextagePyBullet) -> Non
     np.testing.assert_array_equal(home.configuration["right"], robot.home("right"))
 
 
+def test_the_scene_names_the_table_the_checker_uses(robot: NextagePyBullet) -> None:
+    table = robot.scene.table
+    assert table is not None and table.name == "table"
+    top = table.T_world[2, 3] + table.mesh.bounds[1, 2]
+    assert top == pytest.approx(robot.settings.table_height)
+    np.testing.assert_allclose(table.mesh.extents[:2], robot.settings.table_size)
+    # the checker's table is there: the TCP 1 cm into the table top collides, 5 cm above does not
+    down = robot.fk("left", robot.home("left"))
+    for depth, hit in ((0.05, False), (-0.01, True)):
+        T = down.copy()
+        T[:3, 3] = [0.35, 0.25, robot.settings.table_height + depth]
+        res = robot.ik("left", T)
+        assert res.success and robot.scene.in_collision("left", res.q[None])[0] == hit
+
+
 def test_planning_never_moves_the_simulator(robot: NextagePyBullet) -> None:
     from asmteach.core.models import PartSpec, Primitive, SolidSpec
     from asmteach.core.parts import build_part

@@ -84,6 +84,13 @@ class GantryScene(PlanningScene):
         self._fk, self._hand, self._table = fk, hand, table
         self._geometry = geometry if geometry is not None else _Geometry()
 
+    @property
+    def table(self) -> Obstacle:
+        t = self._table
+        T = np.eye(4)
+        T[:3, 3] = [t.center[0], t.center[1], t.height - 0.025]
+        return Obstacle("table", trimesh.creation.box(extents=[t.size[0], t.size[1], 0.05]), T)
+
     def with_table(self, table: TableBox) -> GantryScene:
         """This scene on another table."""
         return GantryScene(
