@@ -36,8 +36,8 @@ from asmteach.core.io import atomic_path
 from asmteach.core.models import Plan, PlanSegment
 from asmteach.core.trajectory.blended import DEFAULT_DEVIATION, BlendReport, time_optimal
 from asmteach.core.trajectory.timing import segment_profile, time_parametrize, to_trajectory
-from asmteach.plugins.planners.regrasp.assembly import Step
 from asmteach.plugins.planners.regrasp.graph import GOAL, START
+from asmteach.plugins.planners.regrasp.realise import Step
 
 __all__ = ["KINDS", "TIMINGS", "render_regrasp_graph", "robot_seconds", "segment_kinds", "table_obstacle", "to_plan"]
 

@@ -32,17 +32,13 @@ from asmteach.core.interfaces import (
 )
 from asmteach.core.models import Plan
 from asmteach.core.rests.placements import compute_placements
-from asmteach.plugins.planners.regrasp.assembly import (
-    AssemblySettings,
-    PlaceGoal,
-    TransferResult,
-    feasible_grasps_at,
-    placement_slots,
-    plan_transfer,
-)
+from asmteach.plugins.planners.regrasp.assembly import TransferResult, feasible_grasps_at, plan_transfer
 from asmteach.plugins.planners.regrasp.goals import AssemblyGoal, assembly_goal_at, ranked_assembly_goals
 from asmteach.plugins.planners.regrasp.graph import PoseSlot
 from asmteach.plugins.planners.regrasp.plan_io import render_regrasp_graph, table_obstacle, to_plan
+from asmteach.plugins.planners.regrasp.realise import PlaceGoal
+from asmteach.plugins.planners.regrasp.settings import AssemblySettings
+from asmteach.plugins.planners.regrasp.slots import placement_slots
 
 __all__ = ["RegraspAssemblyPlanner"]
 

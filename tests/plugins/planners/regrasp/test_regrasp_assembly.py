@@ -14,8 +14,9 @@ from asmteach.core.parts import build_part, load_structure
 from asmteach.core.rests.placements import compute_placements
 from asmteach.core.scene import random_start_poses
 from asmteach.core.trajectory.interpolate import densify
-from asmteach.plugins.planners.regrasp.assembly import AssemblySettings, placement_slots
 from asmteach.plugins.planners.regrasp.goals import choose_assembly_goal
+from asmteach.plugins.planners.regrasp.settings import AssemblySettings
+from asmteach.plugins.planners.regrasp.slots import placement_slots
 
 STRUCTURE = "configs/parts/set1/peg_in_hole.yaml"
 

@@ -23,14 +23,11 @@ from asmteach.core.interfaces import IKResult, MotionResult, Obstacle, PartModel
 from asmteach.core.models import Grasp, HandSpec, PartSpec, Primitive, SolidSpec
 from asmteach.core.parts import build_part
 from asmteach.core.rests.placements import compute_placements
-from asmteach.plugins.planners.regrasp.assembly import (
-    AssemblySettings,
-    PlaceGoal,
-    placement_slots,
-    plan_transfer,
-    relocated_slots,
-)
+from asmteach.plugins.planners.regrasp.assembly import plan_transfer
 from asmteach.plugins.planners.regrasp.graph import PoseSlot
+from asmteach.plugins.planners.regrasp.realise import PlaceGoal
+from asmteach.plugins.planners.regrasp.settings import AssemblySettings
+from asmteach.plugins.planners.regrasp.slots import placement_slots, relocated_slots
 
 HAND = HandSpec(name="test_2f", max_width=0.085, finger_size=[0.010, 0.020, 0.045], pad_size=(0.020, 0.030),
                 palm_center=[0.0, 0.0, -0.050], palm_size=[0.040, 0.100, 0.040])

@@ -7,8 +7,8 @@ import pytest
 
 from asmteach.core.errors import UserError
 from asmteach.core.models import GripperEvent
-from asmteach.plugins.planners.regrasp.assembly import Step
 from asmteach.plugins.planners.regrasp.plan_io import robot_seconds, segment_kinds, to_plan
+from asmteach.plugins.planners.regrasp.realise import Step
 
 LABELS = [
     "move to pre-grasp 3 of peg at start", "approach grasp 3", "close on peg", "lift peg",

@@ -8,8 +8,8 @@ import pytest
 from pydantic import ValidationError
 
 from asmteach.plugins.planners.regrasp import planner as planner_module
-from asmteach.plugins.planners.regrasp.assembly import AssemblySettings
 from asmteach.plugins.planners.regrasp.planner import RegraspAssemblyPlanner
+from asmteach.plugins.planners.regrasp.settings import AssemblySettings
 
 
 @pytest.mark.parametrize("timing", ["toppra", "trapezoid"])

@@ -1,0 +1,379 @@
+"""From a keyframe path of the regrasp graph to joint paths: realising one part's transfer.
+
+For each hold (pick at one slot, carry to the next): the other arms go home,
+a free motion to the pre-grasp pose, a straight approach, close, a straight
+lift, a free carry to above the place slot, a straight place or insertion,
+release, a straight retreat; at the end every arm goes home. Two passes:
+first every keyframe (IK) and straight line (Cartesian IK and collision),
+each free motion's end checked for collision and left as a query; then the
+motion planner's queries, in order. A failure raises :class:`MotionFailure`
+naming the graph edge (and, when no path through it can succeed, the node)
+to ban before the graph is searched again.
+
+Frames: ``T_world_*`` 4x4 in metres; joint paths in radians.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import networkx as nx
+import numpy as np
+
+from asmteach.core.failures import FailureKind
+from asmteach.core.interfaces import MotionPlanner, Obstacle, PartModel, Robot
+from asmteach.core.models import Grasp, GripperEvent
+from asmteach.core.trajectory.batch import batched, inverse_clearance_cost
+from asmteach.core.trajectory.interpolate import densify
+from asmteach.plugins.planners.regrasp.feasibility import approach_offset, variant_tcp
+from asmteach.plugins.planners.regrasp.graph import GOAL, START, KeyframeSearch, PoseSlot
+from asmteach.plugins.planners.regrasp.settings import AssemblySettings
+
+__all__ = [
+    "MotionFailure",
+    "PlaceGoal",
+    "Step",
+    "cartesian_path",
+    "realise_keyframes",
+    "reset_world",
+    "set_world",
+]
+
+
+@dataclass(frozen=True)
+class PlaceGoal:
+    """Where a part must end: its pose, how it comes in, and what it may touch there."""
+
+    slot: PoseSlot
+    approach: np.ndarray
+    """World vector (metres) from the placed pose back to where the straight final move starts."""
+    touch: tuple[str, ...] = ("table",)
+    """Obstacles the held part may touch on the final move (intended contact)."""
+    on_table: bool = True
+    """True when the part rests on the table at the goal (grasps then must come from above)."""
+
+
+@dataclass
+class Step:
+    """One step of a plan: an untimed joint path of one arm, or a gripper event."""
+
+    label: str
+    kind: Literal["path", "gripper"]
+    arm: str
+    path: np.ndarray | None = None
+    event: GripperEvent | None = None
+
+
+class MotionFailure(Exception):
+    """A keyframe motion failed; ``edge`` is the graph edge to ban, ``node`` a node whose every edge is banned."""
+
+    def __init__(self, edge: tuple[Any, Any], reason: str, node: Any | None = None, timed_out: bool = False) -> None:
+        super().__init__(reason)
+        self.edge = edge
+        self.reason = reason
+        self.node = node
+        self.timed_out = timed_out  # a wall-clock limit, not the search, ended it: the result depends on the load
+
+
+def cartesian_path(
+    robot: Robot, arm: str, q_start: np.ndarray, T_goal: np.ndarray, step: float
+) -> tuple[np.ndarray | None, str | None]:
+    """Joint path moving the TCP on a straight line to ``T_goal`` (orientation kept; IK per step)."""
+    T0 = robot.fk(arm, q_start)
+    dist = float(np.linalg.norm(T_goal[:3, 3] - T0[:3, 3]))
+    n = max(2, int(np.ceil(dist / step)) + 1)
+    path = [np.asarray(q_start, float)]
+    for s in np.linspace(0.0, 1.0, n)[1:]:
+        T = T_goal.copy()
+        T[:3, 3] = (1.0 - s) * T0[:3, 3] + s * T_goal[:3, 3]
+        res = robot.ik(arm, T, q_seed=path[-1])
+        if not res.success or res.q is None or getattr(res, "flipped", False):
+            return None, f"IK fails {s * dist * 1000:.0f} mm along the straight line"
+        if np.max(np.abs(res.q - path[-1])) > 0.3:
+            return None, "the straight line crosses a singularity or a change of IK branch"
+        path.append(np.asarray(res.q, float))
+    return np.asarray(path), None
+
+
+def set_world(robot: Robot, world: Sequence[Obstacle], *extra: Obstacle) -> None:
+    """The robot's obstacles: ``world`` and ``extra`` without the table, which the robot models itself."""
+    robot.set_obstacles([o for o in world if o.name != "table"] + list(extra))
+
+
+def reset_world(robot: Robot, world: Sequence[Obstacle]) -> None:
+    """The robot's obstacles hold ``world`` (:func:`set_world`) and no arm holds anything."""
+    set_world(robot, world)
+    for arm in robot.arms:
+        robot.attach(arm, None)
+
+
+class _Checker:
+    """Collision checks of one arm's paths against the robot's current world.
+
+    ``valid`` and ``cost`` answer one configuration and, through ``.batch``,
+    many at once (the robot's checker is ~25x cheaper per configuration in a
+    batch; T-RRT checks whole edges that way).
+    """
+
+    def __init__(self, robot: Robot, arm: str) -> None:
+        self.robot, self.arm = robot, arm
+        self.valid = batched(
+            lambda q: not bool(robot.in_collision(arm, np.asarray(q, float)[None, :])[0]),
+            lambda qs: ~np.asarray(robot.in_collision(arm, qs), bool),
+        )
+        # T-RRT climbs this cost map: high within a few mm of obstacles, flat beyond 10 cm (metres),
+        # so clearances beyond 10 cm need not be measured exactly.
+        cap = 0.10
+        clearance = batched(
+            lambda q: float(robot.clearance(arm, np.asarray(q, float)[None, :], upto=cap)[0]),
+            lambda qs: np.asarray(robot.clearance(arm, qs, upto=cap), float),
+        )
+        self.cost = inverse_clearance_cost(clearance, floor=0.005, cap=cap)
+
+    def first_hit(self, path: np.ndarray, ignore: Sequence[str] = ()) -> int | None:
+        hits = self.robot.in_collision(self.arm, np.asarray(path, float), ignore=ignore)
+        return int(np.argmax(hits)) if np.any(hits) else None
+
+
+@dataclass(frozen=True)
+class _Scene:
+    """What the robot's checker holds while one free motion is planned: the obstacles beyond ``world``,
+    the part held (arm, part, ``T_tcp_part``, jaw width in metres) and every arm's configuration (radians)."""
+
+    extra: tuple[Obstacle, ...]
+    held: tuple[str, PartModel, np.ndarray, float] | None
+    q: dict[str, np.ndarray]
+
+    def apply(self, robot: Robot, world: Sequence[Obstacle]) -> None:
+        set_world(robot, world, *self.extra)
+        for arm in robot.arms:
+            if self.held is not None and self.held[0] == arm:
+                robot.attach(arm, self.held[1], self.held[2], width=self.held[3])
+            else:
+                robot.attach(arm, None)
+        for arm, q in self.q.items():
+            robot.set_configuration(arm, q)
+
+
+@dataclass(frozen=True)
+class _FreeMotion:
+    """A free motion left for the motion planner: ``steps[step]`` gets its path."""
+
+    step: int
+    arm: str
+    q_a: np.ndarray
+    q_b: np.ndarray
+    edge: tuple[Any, Any]
+    what: str
+    scene: _Scene
+
+
+def realise_keyframes(
+    robot: Robot,
+    planner: MotionPlanner,
+    part: PartModel,
+    grasps: dict[int, Grasp],
+    G: nx.Graph,
+    search: KeyframeSearch,
+    goal: PlaceGoal,
+    world: Sequence[Obstacle],
+    q_now: dict[str, np.ndarray],
+    settings: AssemblySettings,
+) -> tuple[list[Step], dict[str, np.ndarray], list[dict[str, Any]], float]:
+    """Keyframes to paths and the least clearance (m) of the free motions; raises
+    :class:`MotionFailure` with the edge to ban.
+
+    Two passes: first every keyframe (IK) and straight line (Cartesian IK and
+    collision), each free motion's end checked for collision and left as a
+    query; then the motion planner's queries, in order. A keyframe sequence
+    that fails at a straight line (an insertion whose fingers meet the other
+    part, say) then costs milliseconds, not the free motions planned before it.
+    """
+    nodes = search.nodes
+    steps: list[Step] = []
+    keyframes: list[dict[str, Any]] = []
+    queries: list[_FreeMotion] = []
+    q_cur = {k: np.asarray(v, float).copy() for k, v in q_now.items()}
+    q_set: dict[str, np.ndarray] = {}  # the configurations the robot holds now
+    extra: tuple[Obstacle, ...] = ()
+    held: tuple[str, PartModel, np.ndarray, float] | None = None
+    T_part = G.nodes[nodes[0]]["slot"].T_world_part  # where the part lies now
+
+    def put(arm: str, q: np.ndarray) -> None:
+        robot.set_configuration(arm, q)
+        q_set[arm] = np.asarray(q, float).copy()
+
+    def free(arm: str, q_a: np.ndarray, q_b: np.ndarray, edge: tuple[Any, Any], what: str, label: str) -> None:
+        """Leave a free motion for the second pass; its end must be collision-free in the robot's world now."""
+        if bool(robot.in_collision(arm, np.asarray(q_b, float)[None, :])[0]):
+            # No motion to it can succeed, whatever edge leads there: ban the node.
+            raise MotionFailure(edge, f"{what}: {FailureKind.GOAL_INVALID.value}", node=edge[1])
+        queries.append(_FreeMotion(len(steps), arm, np.asarray(q_a, float), np.asarray(q_b, float), edge, what,
+                                   _Scene(extra, held, dict(q_set))))
+        steps.append(Step(label, "path", arm))
+
+    i = 0
+    while i < len(nodes):
+        # one hold: pick at nodes[i], carry (transfer edges) to nodes[j]
+        j = i
+        while j + 1 < len(nodes) and G.edges[nodes[j], nodes[j + 1]]["kind"] == "transfer":
+            j += 1
+        if j == i:  # a lone node followed by a transit edge: the regrasp happens at this slot
+            i += 1
+            continue
+        pick, place = nodes[i], nodes[j]
+        into = START if i == 0 else nodes[i - 1]
+        arm, vid = pick[2], pick[1]
+        slot_pick, slot_place = G.nodes[pick]["slot"], G.nodes[place]["slot"]
+        final = place[0] == goal.slot.name and j == len(nodes) - 1
+        chk = _Checker(robot, arm)
+
+        # 0. the other arms go home (the grasp graph was screened with them there) and stay put
+        robot.attach(arm, None)
+        held = None
+        extra = (Obstacle(part.name, part.mesh, T_part),)
+        set_world(robot, world, *extra)
+        for a in robot.arms:
+            put(a, q_cur[a])
+        for other in robot.arms:
+            if other != arm and not np.allclose(q_cur[other], robot.home(other)):
+                free(other, q_cur[other], robot.home(other), (into, pick),
+                     f"{other} arm home before the {arm} arm picks", f"{other} arm home")
+                q_cur[other] = robot.home(other)
+                put(other, q_cur[other])
+        # 1. free motion to the pre-grasp pose; the part is an obstacle where it lies
+        T_grasp = slot_pick.T_world_part @ variant_tcp(grasps, vid)
+        pre = robot.ik(arm, approach_offset(T_grasp, settings.pregrasp_distance), q_seed=G.nodes[pick]["q"])
+        if not pre.success or pre.q is None or getattr(pre, "flipped", False):
+            raise MotionFailure((into, pick), f"pre-grasp pose at {pick[0]} has no IK solution", node=pick)
+        free(arm, q_cur[arm], pre.q, (into, pick), f"motion to the pre-grasp at {pick[0]}",
+             f"move to pre-grasp {vid} of {part.name} at {pick[0]}")
+        keyframes.append({"name": f"pregrasp_{pick[0]}", "arm": arm, "q": np.asarray(pre.q).tolist()})
+        # 2. straight approach without the part as obstacle (the fingers go around it)
+        extra = ()
+        set_world(robot, world)
+        down = _line(robot, chk, arm, pre.q, T_grasp, settings, (into, pick), f"approach at {pick[0]}", node=pick)
+        steps.append(Step(f"approach grasp {vid}", "path", arm, down))
+        keyframes.append({"name": f"grasp_{pick[0]}", "arm": arm, "q": down[-1].tolist()})
+        width = grasps[vid // 2].width
+        steps.append(Step(f"close on {part.name}", "gripper", arm,
+                          event=GripperEvent(arm=arm, action="close", width=width, attach=part.name)))
+        T_tcp_now = robot.fk(arm, down[-1])
+        held = (arm, part, np.linalg.inv(T_tcp_now) @ slot_pick.T_world_part, width)
+        robot.attach(arm, part, held[2], width=width)
+        # 3. lift straight up (the part leaves the table it touched)
+        T_lift = T_tcp_now.copy()
+        T_lift[2, 3] += settings.lift
+        up = _line(robot, chk, arm, down[-1], T_lift, settings, (pick, nodes[i + 1]), f"lift at {pick[0]}",
+                   ignore=("table",), node=pick)
+        steps.append(Step(f"lift {part.name}", "path", arm, up))
+        # 4. carry to the start of the final straight move
+        T_place_tcp = slot_place.T_world_part @ variant_tcp(grasps, vid)
+        approach = goal.approach if final else np.array([0.0, 0.0, settings.lift])
+        T_above = T_place_tcp.copy()
+        T_above[:3, 3] += approach
+        above = robot.ik(arm, T_above, q_seed=G.nodes[place]["q"])
+        if not above.success or above.q is None or getattr(above, "flipped", False):
+            raise MotionFailure((pick, nodes[i + 1]), f"no IK solution above {place[0]}", node=place)
+        free(arm, up[-1], above.q, (pick, nodes[i + 1]), f"carrying {part.name} to {place[0]}",
+             f"carry {part.name} to {place[0]}")
+        keyframes.append({"name": f"{'preassembly' if final and not goal.on_table else 'above'}_{place[0]}",
+                          "arm": arm, "q": np.asarray(above.q).tolist()})
+        # 5. final straight move: place on the table, or insert along v_a
+        touch = goal.touch if final else ("table",)
+        T_release = T_place_tcp.copy()
+        if goal.on_table or not final:
+            T_release[2, 3] += settings.release_gap
+        last = _line(robot, chk, arm, above.q, T_release, settings, (pick, nodes[i + 1]),
+                     f"{'insertion' if final and not goal.on_table else 'placing'} at {place[0]}", ignore=touch,
+                     node=place)
+        steps.append(Step(f"{'insert' if final and not goal.on_table else 'place'} {part.name} at {place[0]}",
+                          "path", arm, last))
+        keyframes.append({"name": f"placed_{place[0]}", "arm": arm, "q": last[-1].tolist()})
+        # 6. release and back off along the approach axis
+        steps.append(Step(f"release {part.name}", "gripper", arm, event=GripperEvent(arm=arm, action="open")))
+        robot.attach(arm, None)
+        held = None
+        T_part = slot_place.T_world_part
+        # the opened fingers back off past the part they let go of, now an obstacle where it was placed
+        extra = (Obstacle(part.name, part.mesh, T_part),)
+        set_world(robot, world, *extra)
+        back = _line(robot, chk, arm, last[-1],
+                     approach_offset(robot.fk(arm, last[-1]), settings.pregrasp_distance), settings,
+                     (pick, nodes[i + 1]), f"retreat at {place[0]}", node=place)
+        steps.append(Step("retreat", "path", arm, back))
+        q_cur[arm] = back[-1]
+        i = j + 1  # the edge after a hold is a transit (regrasp at that slot) or the end
+    # 7. home, with the part now an obstacle where it was placed
+    extra = (Obstacle(part.name, part.mesh, T_part),)
+    set_world(robot, world, *extra)
+    for arm in robot.arms:
+        home = robot.home(arm)
+        for other in robot.arms:
+            put(other, q_cur[other])
+        if np.allclose(q_cur[arm], home):
+            continue
+        free(arm, q_cur[arm], home, (nodes[-1], GOAL), f"{arm} arm back home", f"{arm} arm home")
+        q_cur[arm] = home
+    end = _Scene(extra, None, dict(q_set))
+    # second pass: the motion planner, in the order the robot moves
+    clearances: list[float] = []
+    for m in queries:
+        m.scene.apply(robot, world)
+        steps[m.step].path = _free(robot, planner, m.arm, m.q_a, m.q_b, settings, m.edge, m.what, clearances)
+    end.apply(robot, world)
+    return steps, q_cur, keyframes, (min(clearances) if clearances else float("nan"))
+
+
+def _free(
+    robot: Robot,
+    planner: MotionPlanner,
+    arm: str,
+    q_a: np.ndarray,
+    q_b: np.ndarray,
+    settings: AssemblySettings,
+    edge: tuple[Any, Any],
+    what: str,
+    clearances: list[float],
+) -> np.ndarray:
+    """A collision-free joint path from the motion planner, cost = inverse clearance;
+    its minimum clearance (metres) is appended to ``clearances``."""
+    chk = _Checker(robot, arm)
+    lo, hi = robot.joint_limits(arm)
+    res = planner.plan(np.asarray(q_a, float), np.asarray(q_b, float), lower=lo, upper=hi, is_valid=chk.valid,
+                       cost=chk.cost, time_limit=settings.motion_time_limit)
+    if not res.success or res.path is None:
+        # The goal configuration itself is in collision (a held part against the robot, say): no motion
+        # to it can succeed, whatever edge leads there.
+        bad_goal = edge[1] if res.kind is FailureKind.GOAL_INVALID else None
+        raise MotionFailure(edge, f"{what}: {res.reason}", node=bad_goal, timed_out=res.kind is FailureKind.TIMEOUT)
+    path = np.asarray(res.path, float)
+    # clearance of the free motion in the world it was planned in, every 0.05 rad (for the statistics)
+    clearances.append(float(np.min(robot.clearance(arm, densify(path, 0.05)))))
+    return path
+
+
+def _line(
+    robot: Robot,
+    chk: _Checker,
+    arm: str,
+    q_from: np.ndarray,
+    T_to: np.ndarray,
+    settings: AssemblySettings,
+    edge: tuple[Any, Any],
+    what: str,
+    ignore: Sequence[str] = (),
+    node: Any | None = None,
+) -> np.ndarray:
+    """A straight TCP line; on failure ``node``, the grasp at the slot the line belongs to, is banned whole."""
+    path, why = cartesian_path(robot, arm, np.asarray(q_from, float), T_to, settings.cartesian_step)
+    if path is None:
+        raise MotionFailure(edge, f"{what}: {why}", node=node)
+    hit = chk.first_hit(path, ignore=ignore)
+    if hit is not None:
+        pairs = robot.collision_report(arm, path[hit])
+        who = ", ".join(f"{a}/{b}" for a, b in pairs[:2]) or "unknown pair"
+        raise MotionFailure(edge, f"{what}: collision at step {hit} ({who})", node=node)
+    return path
