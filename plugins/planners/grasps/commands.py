@@ -26,8 +26,9 @@ from asmteach.core.models import HandSpec
 from asmteach.core.parts import MESH_SUFFIXES
 from asmteach.core.parts import load_parts as load_library_parts
 from asmteach.plugins.planners.grasps.checks import check_mesh
-from asmteach.plugins.planners.grasps.planner import AntipodalGraspPlanner, AntipodalSettings
+from asmteach.plugins.planners.grasps.planner import AntipodalGraspPlanner
 from asmteach.plugins.planners.grasps.render import render_grasps
+from asmteach.plugins.planners.grasps.settings import AntipodalSettings
 
 __all__ = ["asmteach_add_commands", "load_hand", "load_parts", "run_grasps"]
 

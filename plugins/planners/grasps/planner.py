@@ -65,21 +65,17 @@ import hashlib
 import json
 import logging
 import time
-from collections import deque
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
-from pydantic import Field, ValidationError
+from pydantic import ValidationError
 
 from asmteach.core.errors import UserError
-from asmteach.core.hand_geometry import MeshCollider, hand_boxes
 from asmteach.core.interfaces import GraspPlanner, PartModel
 from asmteach.core.io import cache_root, write_json
-from asmteach.core.models import Grasp, HandSpec, StrictModel
+from asmteach.core.models import Grasp, HandSpec
 from asmteach.core.parts import mesh_hash
-from asmteach.core.rests.placements import compute_placements
 from asmteach.plugins.planners.grasps.antipodal import antipodal_angles, friction_half_angle
 from asmteach.plugins.planners.grasps.checks import (
     check_graspable_width,
@@ -89,87 +85,21 @@ from asmteach.plugins.planners.grasps.checks import (
 )
 from asmteach.plugins.planners.grasps.contact import PadStrip, load_ratio, pad_contacts, pad_strip
 from asmteach.plugins.planners.grasps.sampling import ContactPairs, Raycaster, find_opposite_contacts, sample_surface
+from asmteach.plugins.planners.grasps.selection import (
+    MIN_STEEPNESS,
+    Candidates,
+    resting_directions,
+    select_grasps,
+)
+from asmteach.plugins.planners.grasps.settings import AntipodalSettings
 
-__all__ = ["AntipodalGraspPlanner", "AntipodalSettings", "default_cache_dir", "resting_directions",
-           "sphere_directions", "table_gaps"]
+__all__ = ["AntipodalGraspPlanner", "default_cache_dir"]
 
 log = logging.getLogger(__name__)
 
 CACHE_VERSION = 4
-# Fingers checked this far off the contact planes when closed (metres), so touching is not colliding.
-_CONTACT_GAP = 2e-4
 # Shallow grasps set back less than this (metres) are the centred grasp again, for every purpose.
 _MIN_SET_BACK = 1e-3
-# Shallow grasps are ranked by the hand's clearance above the table in steps of this (metres): finer
-# differences are within the approach clearance (2 mm a side) and not worth a worse score.
-_GAP_STEP = 0.002
-# Approaches steeper than this (cosine to a resting pose's downward direction) are offered per resting pose.
-_MIN_STEEPNESS = 0.5
-
-
-class ScoreWeights(StrictModel):
-    """Weights of the quality terms (each term is in [0, 1]; the score is their weighted sum)."""
-
-    com: float = Field(0.5, ge=0.0, description="grasp axis close to the centre of mass (less torque to resist)")
-    alignment: float = Field(0.2, ge=0.0, description="contact normals along the grasp axis (deep in the cone)")
-    pad: float = Field(
-        0.3, ge=0.0,
-        description="the worse pad's torsion radius (contact patch, soft pad) over a fully pressed pad's: "
-        "patches beat lines, lines beat points")
-
-
-class AntipodalSettings(StrictModel):
-    """Settings of :class:`AntipodalGraspPlanner` (metres, radians unless named ``*_deg``)."""
-
-    mu: float = Field(0.3, gt=0.0, le=2.0, description="Coulomb friction coefficient of the friction-cone test")
-    samples: int = Field(600, ge=10, le=100_000, description="area-weighted surface samples")
-    facet_centres: bool = Field(True, description="also sample the centre of every planar facet")
-    orientations: int = Field(24, ge=1, le=360, description="palm orientations sampled about each grasp axis")
-    clearance: float = Field(0.002, ge=0.0, description="free space per side between fingers and part on approach")
-    approach_sweep: float = Field(0.03, ge=0.0, description="hand boxes extended backward by this approach path")
-    approach_opening: Literal["full", "pre-shaped"] = Field(
-        "full",
-        description="the hand on its approach: fully open (the Nextage plugin opens the gripper completely before "
-        "every approach, in execution and in the plan re-check) or pre-shaped to the width plus clearance a side")
-    pad_grid: tuple[int, int] = Field(
-        (7, 9), description="pad sample points along the pad's x and z (odd counts put one on the pad centre)")
-    compliance: float = Field(
-        0.0015, gt=0.0, le=0.01,
-        description="compressible depth of the soft pads (metres): surface within this depth of the first touch "
-        "is in contact, and no point of the part may stand further in front of the planned contact's pad plane")
-    pad_inset: float = Field(0.0005, ge=0.0, description="pad samples kept this far inside the pad edge")
-    edge_margin: float = Field(
-        0.004, ge=0.0,
-        description="set-backs keep the contacts at least this far inside the pad's fingertip edge (metres): a "
-        "contact on the very edge of the pad slips off it")
-    pad_min_support: float = Field(
-        0.0, ge=0.0, le=1.0,
-        description="optional: share of each pad that must be in contact (1.0: pads fully on a face); 0 leaves it "
-        "to the contact model, which accepts line and point contacts on curved parts")
-    hold_safety: float = Field(
-        1.5, ge=0.0,
-        description="the grasp must bear this multiple of the part's weight and of its moment about the grasp "
-        "axis (soft-finger limit surface, friction mu, force hand.max_force per pad); 0 turns the check off")
-    min_thickness: float = Field(0.002, gt=0.0, description="walls thinner than this mark a thin shell")
-    dedup_distance: float = Field(0.005, ge=0.0, description="TCPs closer than this ...")
-    dedup_angle_deg: float = Field(15.0, ge=0.0, le=180.0, description="... and rotations closer than this are one")
-    max_grasps: int = Field(
-        600, ge=1,
-        description="keep at most this many; each resting pose of the part can use only those approaching from "
-        "above it, about a quarter")
-    set_backs: bool = Field(
-        True,
-        description="also offer each orientation at its shallowest set-back (TCP moved back along -z, at most half "
-        "a pad length, in steps of half the pad grid's row spacing); False: pads always centred on the contacts")
-    approach_bins: int = Field(
-        32, ge=1, le=1000, description="approach directions (part frame) the kept grasps are spread over")
-    rest_poses: int = Field(
-        24, ge=0, le=1000,
-        description="resting poses of the part (most probable first) that each get, per contact pair, the "
-        "orientation approaching most steeply from above, and their own buckets in the selection")
-    weights: ScoreWeights = Field(default_factory=ScoreWeights)
-    cache: bool = Field(True, description="read and write the on-disk cache")
-    cache_dir: str | None = Field(None, description="cache folder; default $ASMTEACH_CACHE_DIR or ~/.cache/asmteach")
 
 
 def default_cache_dir() -> Path:
@@ -291,7 +221,7 @@ class AntipodalGraspPlanner(GraspPlanner):
         if len(cand.pair_idx) == 0:
             raise UserError(self._no_contact_reason(part, hand, counts))
         score = self._score(part, pairs, angles, cand.pair_idx, cand.support, cone, mesh.extents)
-        grasps, n_dup, n_col, kept = self._select(part, hand, pairs, cand, score, down)
+        grasps, n_dup, n_col, kept = select_grasps(part, hand, pairs, cand, score, down, s)
         stats.update(duplicates=n_dup, colliding=n_col, kept=len(grasps))
         if len(kept):
             stats["contact_share_median"] = round(float(np.median(cand.share[kept])), 3)
@@ -335,7 +265,7 @@ class AntipodalGraspPlanner(GraspPlanner):
         direction ``down`` (``(u, 3)``, part frame, into the table), the one
         approaching most steeply from above with the part resting that way: ``z``
         is the resting direction projected onto the plane normal to the grasp
-        axis (kept when that leaves at least ``_MIN_STEEPNESS`` of it).
+        axis (kept when that leaves at least ``MIN_STEEPNESS`` of it).
         """
         n, k = len(pairs), self.settings.orientations
         y = (pairs.p1 - pairs.p0) / pairs.width[:, None]
@@ -360,7 +290,7 @@ class AntipodalGraspPlanner(GraspPlanner):
         # a tilted finger reaches lower on one side, and on a low part that is the difference.
         proj = down[None, :, :] - np.einsum("nj,uj->nu", y, down)[..., None] * y[:, None, :]  # (n, u, 3)
         norm = np.linalg.norm(proj, axis=2)
-        pi, ui = np.nonzero(norm >= _MIN_STEEPNESS)
+        pi, ui = np.nonzero(norm >= MIN_STEEPNESS)
         zr = proj[pi, ui] / norm[pi, ui, None]
         R_rest = np.stack([np.cross(y[pi], zr), y[pi], zr], axis=-1)
         return np.concatenate([R, R_rest]), np.concatenate([pair_idx, pi])
@@ -368,7 +298,7 @@ class AntipodalGraspPlanner(GraspPlanner):
     def _contacts(
         self, part: PartModel, rc: Raycaster, hand: HandSpec, pairs: ContactPairs, R: np.ndarray,
         pair_idx: np.ndarray,
-    ) -> tuple[_Candidates, dict[str, int]]:
+    ) -> tuple[Candidates, dict[str, int]]:
         """Candidates passing the contact model (:mod:`.contact`), centred and at their shallowest set-back.
 
         Per orientation and set-back ``d`` (the TCP and both pads moved by ``-d * z``, the contacts under
@@ -408,7 +338,7 @@ class AntipodalGraspPlanner(GraspPlanner):
         idx = np.concatenate([keep_c, keep_s])
         radius = pc.torsion_radius[idx, lv].min(axis=1)
         full = _full_pad_radius(strip)
-        return _Candidates(
+        return Candidates(
             R=R[idx],
             pair_idx=pair_idx[idx],
             depth=strip.set_backs[lv],
@@ -437,113 +367,6 @@ class AntipodalGraspPlanner(GraspPlanner):
         s_align = 1.0 - angles[pair_idx].max(axis=1) / cone if cone > 0 else np.ones(len(pair_idx))
         return w.com * s_com + w.alignment * s_align + w.pad * margin
 
-    def _select(
-        self,
-        part: PartModel,
-        hand: HandSpec,
-        pairs: ContactPairs,
-        cand: _Candidates,
-        score: np.ndarray,
-        down: np.ndarray,
-    ) -> tuple[list[Grasp], int, int, np.ndarray]:
-        """Round robin over the buckets, best first in each: skip near-duplicates of kept grasps, then collisions.
-
-        Each round gives every bucket that still has candidates one kept grasp
-        (:func:`_round_robin_queues`), until ``max_grasps`` are kept. Checking
-        duplicates before collisions gives the same set as filtering collisions
-        first (a candidate is only ever compared with kept, collision-free
-        grasps) while calling fcl far less. The result is sorted by score, best
-        first, ids ``0..n-1``; ``down``: resting directions (part frame). Also returns the duplicate and
-        collision counts and the kept candidates' indices, in the grasps' order.
-        """
-        s = self.settings
-        collider = MeshCollider({"part": (part.mesh, np.eye(4))})
-        cos_tol = np.cos(np.radians(s.dedup_angle_deg))
-        R = cand.R
-        mid = 0.5 * (pairs.p0 + pairs.p1)[cand.pair_idx]
-        tcp_all = mid - cand.depth[:, None] * R[:, :, 2]
-        # The open hand on its way in: its fingers are what may hit the part (or the table) on the approach.
-        opening = np.minimum(pairs.width[cand.pair_idx] + 2.0 * s.clearance, hand.max_width)
-        if s.approach_opening == "full":
-            opening = np.full(len(R), float(hand.max_width))
-        queues = _round_robin_queues(part, hand, cand, tcp_all, opening, down, score, s.approach_bins)
-        kept: list[int] = []
-        kept_t = np.zeros((0, 3))
-        kept_R = np.zeros((0, 3, 3))
-        n_dup = n_col = 0
-
-        def accept(i: int) -> bool:
-            nonlocal n_dup, n_col
-            tcp, Ri = tcp_all[i], R[i]
-            if len(kept):
-                near = np.linalg.norm(kept_t - tcp, axis=1) < s.dedup_distance
-                if np.any(near):
-                    # cos of the rotation angle from the trace, for R and for the
-                    # finger-swapped R (x, y negated): the same physical grasp.
-                    d = np.einsum("kij,ij->kj", kept_R[near], Ri)  # column-wise dot products
-                    same = (d.sum(1) - 1.0) / 2.0
-                    swap = (-d[:, 0] - d[:, 1] + d[:, 2] - 1.0) / 2.0
-                    if np.any(np.maximum(same, swap) > cos_tol + 1e-9):  # strictly closer than the angle
-                        n_dup += 1
-                        return False
-            T = np.eye(4)
-            T[:3, :3], T[:3, 3] = Ri, tcp
-            width = float(pairs.width[cand.pair_idx[i]])
-            # Closed on the part and open on the way in. Closed, the fingers stand off the contact planes by
-            # the pads' compliance: material within it is the pads' contact patch (the contact model's).
-            closed = hand_boxes(hand, width + 2.0 * (_CONTACT_GAP + s.compliance))
-            approach = hand_boxes(hand, float(opening[i]), sweep=s.approach_sweep)
-            if collider.collides(closed, T) or collider.collides(approach, T):
-                n_col += 1
-                return False
-            return True
-
-        while queues and len(kept) < s.max_grasps:
-            for q in queues:
-                while q:
-                    i = q.popleft()
-                    if accept(i):
-                        kept.append(i)
-                        kept_t = np.vstack([kept_t, tcp_all[i]])
-                        kept_R = np.concatenate([kept_R, R[i][None]])
-                        break
-                if len(kept) >= s.max_grasps:
-                    break
-            queues = [q for q in queues if q]
-        kept.sort(key=lambda i: (-score[i], i))
-        grasps = []
-        for k, i in enumerate(kept):
-            j = cand.pair_idx[i]
-            off = cand.depth[i] * R[i][:, 2]
-            grasps.append(
-                Grasp(id=k, p0=pairs.p0[j] - off, p1=pairs.p1[j] - off, R=R[i], width=float(pairs.width[j]),
-                      score=float(score[i]))
-            )
-        return grasps, n_dup, n_col, np.asarray(kept, dtype=int)
-
-
-@dataclass
-class _Candidates:
-    """Grasp candidates that pass the contact model (part frame): rotations, contact pair, set-back, contact."""
-
-    R: np.ndarray
-    """``(m, 3, 3)`` TCP rotations."""
-    pair_idx: np.ndarray
-    """``(m,)`` index into the contact pairs."""
-    depth: np.ndarray
-    """``(m,)`` set-back of the TCP along its -z from the contacts' midpoint (metres)."""
-    support: np.ndarray
-    """``(m,)`` the worse pad's torsion radius over a fully pressed pad's, in [0, 1]."""
-    share: np.ndarray
-    """``(m,)`` share of the worse pad in contact (a patch: up to 1; a line or a point: a few pad points)."""
-    radius: np.ndarray
-    """``(m,)`` the worse pad's torsion radius (metres)."""
-
-    @property
-    def shallow(self) -> np.ndarray:
-        """``(m,)`` bool: at the shallowest set-back (else the pads are centred on the contacts)."""
-        return self.depth > 0.0
-
 
 def _full_pad_radius(strip: PadStrip) -> float:
     """Torsion radius (metres) of a pad fully and evenly pressed, about its centre: the mean distance of its
@@ -552,85 +375,3 @@ def _full_pad_radius(strip: PadStrip) -> float:
     return float(np.mean(np.hypot(strip.x[:, None], z[None, :] - z.mean())))
 
 
-def resting_directions(part: PartModel) -> np.ndarray:
-    """``(u, 3)`` unit vectors into the table (part frame) of the part's stable placements, most probable first.
-
-    The placements are those the regrasp planner rests the part in (``compute_placements``); empty when
-    they cannot be computed.
-    """
-    try:
-        placements = compute_placements(part)
-    except UserError:
-        return np.zeros((0, 3))
-    return np.array([p.T_table_part[:3, :3].T @ np.array([0.0, 0.0, -1.0]) for p in placements]).reshape(-1, 3)
-
-
-def table_gaps(
-    part: PartModel, hand: HandSpec, R: np.ndarray, tcp: np.ndarray, opening: np.ndarray, down: np.ndarray
-) -> np.ndarray:
-    """``(m, u)`` clearance (metres) of the hand above the table with the part in each resting pose.
-
-    ``R``, ``tcp``: ``(m, 3, 3)``, ``(m, 3)`` TCP poses in the part frame; ``opening``: ``(m,)`` jaw
-    openings (metres); ``down``: ``(u, 3)`` resting directions (:func:`resting_directions`). The clearance
-    is the table's height above the hand's lowest point (palm and finger boxes, by the boxes' support
-    functions), both along the resting direction; negative when the hand would enter the table.
-    """
-    m = len(R)
-    if len(down) == 0 or m == 0:
-        return np.zeros((m, len(down)))
-    hull = np.asarray(part.mesh.convex_hull.vertices, dtype=float)
-    table = np.max(hull @ down.T, axis=0)  # (u,) how far the part reaches along each resting direction
-    axes_u = np.einsum("mik,ui->muk", R, down)  # (m, u, 3): each TCP axis along each resting direction
-    low = np.full((m, len(down)), -np.inf)
-    for name, sign in (("palm", 0.0), ("finger0", -1.0), ("finger1", 1.0)):
-        box = next(b for b in hand_boxes(hand, 0.0) if b.name == name)
-        centre = np.broadcast_to(box.center, (m, 3)).copy()
-        centre[:, 1] += sign * 0.5 * opening  # the fingers' inner faces at +-opening / 2
-        reach = np.einsum("mk,muk->mu", centre, axes_u) + np.abs(axes_u) @ (0.5 * box.size)
-        low = np.maximum(low, reach)
-    return table[None, :] - (tcp @ down.T + low)
-
-
-def sphere_directions(n: int) -> np.ndarray:
-    """``(n, 3)`` unit vectors spread evenly over the sphere (a Fibonacci lattice; deterministic)."""
-    i = np.arange(n) + 0.5
-    polar = np.arccos(1.0 - 2.0 * i / n)
-    azimuth = np.pi * (1.0 + np.sqrt(5.0)) * i
-    return np.stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)], axis=1)
-
-
-def _round_robin_queues(
-    part: PartModel,
-    hand: HandSpec,
-    cand: _Candidates,
-    tcp: np.ndarray,
-    opening: np.ndarray,
-    down: np.ndarray,
-    score: np.ndarray,
-    bins: int,
-) -> list[deque[int]]:
-    """Candidate indices per bucket, in the order they are tried; the buckets in the order of their first
-    candidate's score (ties by index everywhere, so the order is deterministic).
-
-    A shallow candidate belongs to the resting pose (``down``) in which its approach is steepest, if
-    within 60 deg of straight down (``_MIN_STEEPNESS``): shallow grasps are there to keep the fingers off
-    the table, so these buckets are taken by the hand's clearance above the table in that pose
-    (:func:`table_gaps`), highest first in ``_GAP_STEP`` steps, then by score. Every other candidate
-    belongs to the nearest of ``bins`` approach directions (centred or shallow apart), best score first.
-    """
-    m = len(score)
-    approach = cand.R[:, :, 2]
-    bucket = np.argmax(approach @ sphere_directions(bins).T, axis=1) * 2 + cand.shallow.astype(int)
-    steps = np.zeros(m)
-    if len(down):
-        cosines = approach @ down.T
-        pose = np.argmax(cosines, axis=1)
-        rest = cand.shallow & (cosines[np.arange(m), pose] >= _MIN_STEEPNESS)
-        gap = table_gaps(part, hand, cand.R[rest], tcp[rest], opening[rest], down)[np.arange(rest.sum()), pose[rest]]
-        bucket[rest] = 2 * bins + pose[rest]
-        steps[rest] = -np.floor(gap / _GAP_STEP)
-    order = np.lexsort((np.arange(m), -score, steps, bucket))
-    starts = np.flatnonzero(np.r_[True, bucket[order][1:] != bucket[order][:-1]])
-    groups = np.split(order, starts[1:])
-    groups.sort(key=lambda g: (-score[g[0]], int(g[0])))
-    return [deque(int(i) for i in g) for g in groups]

@@ -19,12 +19,8 @@ from asmteach.core.hand_geometry import MeshCollider, hand_boxes, pad_grid
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Grasp, HandSpec, Primitive
 from asmteach.plugins.planners.grasps.filtering import filter_grasps_at_pose
-from asmteach.plugins.planners.grasps.planner import (
-    AntipodalGraspPlanner,
-    resting_directions,
-    sphere_directions,
-    table_gaps,
-)
+from asmteach.plugins.planners.grasps.planner import AntipodalGraspPlanner
+from asmteach.plugins.planners.grasps.selection import resting_directions, sphere_directions, table_gaps
 
 _DOWN = np.array([0.0, 0.0, -1.0])
 
