@@ -160,16 +160,23 @@ def test_check_overrides_names_a_misspelt_key_in_any_section() -> None:
             check_overrides({key: 1})
 
 
-@pytest.mark.parametrize(
-    "experiment",
-    [
-        f"experiment: end_to_end\nparams: {{run_config: {DEMO}, overrides: {{execution.animaton: false}}}}\n",
-        "experiment: structures_corpus\nparams: {family: hex_peg, overrides: {execution.animaton: false}}\n",
-    ],
-    ids=["end_to_end", "structures_corpus"],
-)
-def test_validate_checks_an_experiments_run_config_overrides(experiment, tmp_path, capsys) -> None:
+PEG = REPO / "configs/parts/set1/peg_in_hole.yaml"
+EXPERIMENT_TYPOS = [
+    (f"experiment: end_to_end\nparams: {{run_config: {DEMO}, overrides: {{execution.animaton: false}}}}\n",
+     "execution.animaton: unknown key"),
+    ("experiment: structures_corpus\nparams: {family: hex_peg, overrides: {execution.animaton: false}}\n",
+     "params.overrides: execution.animaton: unknown key"),
+    (f"experiment: teaching_precision\nparams: {{structure: {PEG}, demo: {{framez: 3}}}}\n",
+     "params.demo.framez: unknown key"),
+    (f"experiment: teaching_breakdown\nparams: {{structure: {PEG}, teacher: {{min_frame: 3}}}}\n",
+     "params.teacher.min_frame: unknown key"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("experiment, says", EXPERIMENT_TYPOS, ids=[e[0].split()[1] for e in EXPERIMENT_TYPOS])
+def test_validate_checks_the_run_settings_an_experiment_carries(experiment, says, tmp_path, capsys) -> None:
+    """Settings an experiment hands to a run or a plugin later (dicts in its params) are checked up front."""
     path = tmp_path / "exp.yaml"
     path.write_text(experiment)
     assert main(["validate", str(path)]) == 2
-    assert "execution.animaton: unknown key" in capsys.readouterr().err
+    assert says in capsys.readouterr().err

@@ -16,9 +16,11 @@ from typing import Any
 
 import cv2
 import numpy as np
-from pydantic import Field
+from pydantic import Field, ValidationError
 
 from asmteach.core import geometry
+from asmteach.core.config import format_validation_error
+from asmteach.core.errors import UserError
 from asmteach.core.io import atomic_path, write_text
 from asmteach.core.models import StrictModel
 from asmteach.core.parts import build_part, load_structure
@@ -97,6 +99,14 @@ class TeachingPrecision(Experiment):
     """Paper figure: one cell per (structure, orientation)."""
 
     Params = TeachingParams
+
+    def check(self, params: TeachingParams) -> None:
+        """``demo`` and ``teacher`` by their models before any trial (they stay dicts: the trial ids hash them)."""
+        for key, model in (("demo", DemoSettings), ("teacher", ArucoTeacher.Settings)):
+            try:
+                model.model_validate(getattr(params, key))
+            except ValidationError as exc:
+                raise UserError(format_validation_error(exc, f"params.{key}")) from None
 
     def run_trial(self, params: TeachingParams, seed: int, workdir: Path) -> dict[str, Any]:
         return run_teaching_trial(self.base_dir, params, seed, workdir)
