@@ -102,8 +102,9 @@ def is_closed(faces: np.ndarray) -> bool:
     return bool(np.all(counts == 2))
 
 
-def _orient(simplices: np.ndarray, neighbors: np.ndarray, normals: np.ndarray, points: np.ndarray,
-            scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _orient(
+    simplices: np.ndarray, neighbors: np.ndarray, normals: np.ndarray, points: np.ndarray, scale: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Wind qhull's triangles counter-clockwise about their outward facet normal.
 
     Returns faces, face areas and the face across each directed edge. qhull's
@@ -320,9 +321,7 @@ def _cluster_faces(hull: Hull, angle_tol: float, merge_dist: float) -> np.ndarra
     return labels
 
 
-def support_facets(
-    hull: Hull, *, angle_tol: float = np.radians(1.0), merge_dist: float | None = None
-) -> SupportFacets:
+def support_facets(hull: Hull, *, angle_tol: float = np.radians(1.0), merge_dist: float | None = None) -> SupportFacets:
     """Cluster the faces of a convex ``hull`` into support facets.
 
     Parameters

@@ -232,8 +232,9 @@ def _grid(path: BlendedPath, line_step: float, arc_turn: float) -> np.ndarray:
     return g
 
 
-def _toppra(path: BlendedPath, vel: np.ndarray, acc: np.ndarray, path_speed: float | None,
-            grid: np.ndarray) -> toppra.ParametrizeConstAccel | None:
+def _toppra(
+    path: BlendedPath, vel: np.ndarray, acc: np.ndarray, path_speed: float | None, grid: np.ndarray
+) -> toppra.ParametrizeConstAccel | None:
     constraints: list = [toppra.constraint.JointVelocityConstraint(vel)]
     if path_speed is not None:
         # |q'(s)| = 1 (arc length), so capping every joint at |q_j'(s)| * path_speed caps s_dot at path_speed.
@@ -242,10 +243,14 @@ def _toppra(path: BlendedPath, vel: np.ndarray, acc: np.ndarray, path_speed: flo
             return np.stack([-cap, cap], axis=1)
 
         constraints.append(toppra.constraint.JointVelocityConstraintVarying(vlim))
-    constraints.append(toppra.constraint.JointAccelerationConstraint(
-        acc, discretization_scheme=toppra.constraint.DiscretizationType.Interpolation))
-    algo = toppra.algorithm.TOPPRA(constraints, path, gridpoints=grid, solver_wrapper="seidel",
-                                   parametrizer="ParametrizeConstAccel")
+    constraints.append(
+        toppra.constraint.JointAccelerationConstraint(
+            acc, discretization_scheme=toppra.constraint.DiscretizationType.Interpolation
+        )
+    )
+    algo = toppra.algorithm.TOPPRA(
+        constraints, path, gridpoints=grid, solver_wrapper="seidel", parametrizer="ParametrizeConstAccel"
+    )
     return algo.compute_trajectory(0.0, 0.0)
 
 
@@ -272,8 +277,15 @@ def _within(v: np.ndarray, a: np.ndarray, vel: np.ndarray, acc: np.ndarray) -> b
     return bool(np.all(np.abs(v) <= vel * (1 + 1e-6) + 1e-9) and np.all(np.abs(a) <= acc * (1 + 1e-6) + 1e-9))
 
 
-def _time_piece(pts: np.ndarray, dev: np.ndarray, vel: np.ndarray, acc: np.ndarray, path_speed: float | None,
-                rate_hz: float, report: BlendReport) -> TimedPath:
+def _time_piece(
+    pts: np.ndarray,
+    dev: np.ndarray,
+    vel: np.ndarray,
+    acc: np.ndarray,
+    path_speed: float | None,
+    rate_hz: float,
+    report: BlendReport,
+) -> TimedPath:
     """One rest-to-rest piece (no stop inside) through ``pts``, blended by ``dev``."""
     path = BlendedPath(pts, dev)
     if path.path_interval[1] <= 1e-9:
@@ -299,8 +311,13 @@ def _time_piece(pts: np.ndarray, dev: np.ndarray, vel: np.ndarray, acc: np.ndarr
             v[0] = v[-1] = 0.0
             nearest = [int(np.argmin(np.linalg.norm(q - w, axis=1))) for w in pts]
             nearest[0], nearest[-1] = 0, len(t) - 1
-            return TimedPath(times=t, positions=q, velocities=v, accelerations=a,
-                             waypoint_index=np.maximum.accumulate(np.array(nearest, dtype=int)))
+            return TimedPath(
+                times=t,
+                positions=q,
+                velocities=v,
+                accelerations=a,
+                waypoint_index=np.maximum.accumulate(np.array(nearest, dtype=int)),
+            )
     # toppra failed, kept exceeding the limits or was no faster: rest-to-rest on the checked segments
     report.trapezoid_pieces += 1
     report.stops += len(pts) - 2
@@ -320,8 +337,13 @@ def _concat(parts: Sequence[TimedPath]) -> TimedPath:
         idx.append(wi if k == 0 else wi[1:])
         t0 += p.duration
         count += len(p.times) - skip
-    return TimedPath(times=np.concatenate(times), positions=np.vstack(pos), velocities=np.vstack(vel),
-                     accelerations=np.vstack(acc), waypoint_index=np.concatenate(idx))
+    return TimedPath(
+        times=np.concatenate(times),
+        positions=np.vstack(pos),
+        velocities=np.vstack(vel),
+        accelerations=np.vstack(acc),
+        waypoint_index=np.concatenate(idx),
+    )
 
 
 def time_optimal(
@@ -378,8 +400,9 @@ def time_optimal(
     dev[stop] = 0.0
     if is_valid is not None and len(q) >= 3:
         for _ in range(3):  # full, half, quarter deviation; then no blend
-            bad = [i for i, qs in BlendedPath(q, dev).arc_samples(check_step)
-                   if not np.all(np.asarray(is_valid(qs), bool))]
+            bad = [
+                i for i, qs in BlendedPath(q, dev).arc_samples(check_step) if not np.all(np.asarray(is_valid(qs), bool))
+            ]
             if not bad:
                 break
             for i in bad:
@@ -398,10 +421,13 @@ def time_optimal(
     report.stops += len(cuts) - 2 if len(q) > 1 else 0
     if len(q) == 1:
         single = time_parametrize(q, vel, acc, rate_hz=rate_hz)
-        return TimedPath(single.times, single.positions, single.velocities, single.accelerations,
-                         np.zeros(len(pts), dtype=int))
-    parts = [_time_piece(q[a:b + 1], dev[a:b + 1], vel, acc, path_speed, rate_hz, report)
-             for a, b in itertools.pairwise(cuts)]
+        return TimedPath(
+            single.times, single.positions, single.velocities, single.accelerations, np.zeros(len(pts), dtype=int)
+        )
+    parts = [
+        _time_piece(q[a : b + 1], dev[a : b + 1], vel, acc, path_speed, rate_hz, report)
+        for a, b in itertools.pairwise(cuts)
+    ]
     timed = _concat(parts)
     # waypoint_index for the caller's waypoints (repeats share their first copy's sample)
     timed.waypoint_index = timed.waypoint_index[new_index]

@@ -158,9 +158,12 @@ def asmteach_add_commands(subparsers: argparse._SubParsersAction) -> None:
         "--hand", default="nextage", help="a robot whose gripper to use (nextage, urdf_arm) or a HandSpec YAML/JSON"
     )
     p.add_argument("--mu", type=float, default=0.3, help="friction coefficient of the antipodal test")
-    p.add_argument("--pad-min-support", type=float, default=None,
-                   help="optional share of each pad in contact (default 0: the contact model decides; 1: pads "
-                   "fully on a face)")
+    p.add_argument(
+        "--pad-min-support",
+        type=float,
+        default=None,
+        help="optional share of each pad in contact (default 0: the contact model decides; 1: pads fully on a face)",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-cache", action="store_true", help="plan again even when a cached result exists")
     p.set_defaults(func=run_grasps)

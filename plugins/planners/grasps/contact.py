@@ -76,8 +76,16 @@ class PadStrip:
         return np.stack([gx.ravel(), gz.ravel()], axis=1)
 
 
-def pad_strip(hand: HandSpec, nx: int, nz: int, *, inset: float = 0.0, edge_margin: float = 0.0,
-              set_backs: bool = True, sub: int = 2) -> PadStrip:
+def pad_strip(
+    hand: HandSpec,
+    nx: int,
+    nz: int,
+    *,
+    inset: float = 0.0,
+    edge_margin: float = 0.0,
+    set_backs: bool = True,
+    sub: int = 2,
+) -> PadStrip:
     """The pad grid (``nx`` by ``nz`` points, ``inset`` metres inside the pad's edge) and its set-backs.
 
     Set-backs go from 0 until the contact is ``edge_margin`` metres from the pad's fingertip edge, in
@@ -119,8 +127,17 @@ def _perpendicular(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, np.cross(y, u)
 
 
-def gap_grids(rc: Raycaster, contact: np.ndarray, push: np.ndarray, u: np.ndarray, v: np.ndarray, half: int,
-              spacing: float, probe: float, chunk: int = 200) -> np.ndarray:
+def gap_grids(
+    rc: Raycaster,
+    contact: np.ndarray,
+    push: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    half: int,
+    spacing: float,
+    probe: float,
+    chunk: int = 200,
+) -> np.ndarray:
     """``(n, 2 half + 1, 2 half + 1)`` gaps (metres) over a square grid in each pad plane.
 
     The plane goes through ``contact`` normal to ``push`` (the finger's closing direction); grid point
@@ -131,9 +148,12 @@ def gap_grids(rc: Raycaster, contact: np.ndarray, push: np.ndarray, u: np.ndarra
     k = np.arange(-half, half + 1) * spacing
     out = []
     for s in range(0, len(contact), chunk):
-        c, p, uu, vv = contact[s:s + chunk], push[s:s + chunk], u[s:s + chunk], v[s:s + chunk]
-        pts = (c[:, None, None, :] + k[None, :, None, None] * uu[:, None, None, :]
-               + k[None, None, :, None] * vv[:, None, None, :])  # (n, g, g, 3)
+        c, p, uu, vv = contact[s : s + chunk], push[s : s + chunk], u[s : s + chunk], v[s : s + chunk]
+        pts = (
+            c[:, None, None, :]
+            + k[None, :, None, None] * uu[:, None, None, :]
+            + k[None, None, :, None] * vv[:, None, None, :]
+        )  # (n, g, g, 3)
         origins = pts - probe * p[:, None, None, :]
         dirs = np.broadcast_to(p[:, None, None, :], pts.shape).reshape(-1, 3)
         t, normals, _ = rc.cast(origins.reshape(-1, 3), dirs)
@@ -148,9 +168,18 @@ def gap_grids(rc: Raycaster, contact: np.ndarray, push: np.ndarray, u: np.ndarra
     return np.concatenate(out) if out else np.zeros((0, len(k), len(k)), dtype=np.float32)
 
 
-def pad_contacts(rc: Raycaster, strip: PadStrip, p0: np.ndarray, p1: np.ndarray, R: np.ndarray,
-                 pair_idx: np.ndarray, compliance: float, probe: float, spacing: float = 0.00125,
-                 chunk: int = 4000) -> PadContacts:
+def pad_contacts(
+    rc: Raycaster,
+    strip: PadStrip,
+    p0: np.ndarray,
+    p1: np.ndarray,
+    R: np.ndarray,
+    pair_idx: np.ndarray,
+    compliance: float,
+    probe: float,
+    spacing: float = 0.00125,
+    chunk: int = 4000,
+) -> PadContacts:
     """The contact model (module docstring) for ``m`` candidates at every set-back of ``strip``.
 
     ``p0``, ``p1``: ``(n, 3)`` planned contact pairs (part frame) of finger 0 (pushing along
@@ -180,8 +209,17 @@ def pad_contacts(rc: Raycaster, strip: PadStrip, p0: np.ndarray, p1: np.ndarray,
     return PadContacts(*(np.concatenate([r[i] for r in results]) for i in range(4)))
 
 
-def _evaluate(grids: list[np.ndarray], strip: PadStrip, R: np.ndarray, pair_idx: np.ndarray, u: np.ndarray,
-              v: np.ndarray, half: int, spacing: float, compliance: float) -> tuple[np.ndarray, ...]:
+def _evaluate(
+    grids: list[np.ndarray],
+    strip: PadStrip,
+    R: np.ndarray,
+    pair_idx: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    half: int,
+    spacing: float,
+    compliance: float,
+) -> tuple[np.ndarray, ...]:
     m = len(R)
     nx, rows = len(strip.x), len(strip.z)
     pts = strip.points
@@ -218,8 +256,9 @@ def _evaluate(grids: list[np.ndarray], strip: PadStrip, R: np.ndarray, pair_idx:
     return prot, np.minimum(*shares), np.minimum(*counts), np.stack(radii, axis=-1)
 
 
-def load_ratio(mass: float, force: float, mu: float, com_distance: np.ndarray, torsion_radii: np.ndarray,
-               safety: float = 1.0) -> np.ndarray:
+def load_ratio(
+    mass: float, force: float, mu: float, com_distance: np.ndarray, torsion_radii: np.ndarray, safety: float = 1.0
+) -> np.ndarray:
     """Soft-finger limit-surface load (<= 1 holds) under gravity perpendicular to the grasp axis.
 
     ``mass`` kg, ``force`` N per pad, ``com_distance`` ``(...)`` metres from the axis, ``torsion_radii``

@@ -60,13 +60,19 @@ def asmteach_check_part(part: PartModel, out_dir: Path | None) -> list[tuple[str
     grasps, reason, _ = _plan(part, seed=0)
     if not grasps:
         return [("grasps", "fail", reason or "no grasp found")]
-    return [("grasps", "ok", f"{len(grasps)} parallel-jaw grasps for the Nextage hand "
-                             "(hold-tested in the part_corpus experiment)")]
+    return [
+        (
+            "grasps",
+            "ok",
+            f"{len(grasps)} parallel-jaw grasps for the Nextage hand (hold-tested in the part_corpus experiment)",
+        )
+    ]
 
 
 @hookimpl
-def asmteach_measure_part(part: PartModel, stage: str, seed: int, workdir: Path,
-                          options: dict[str, Any]) -> dict[str, Any] | None:
+def asmteach_measure_part(
+    part: PartModel, stage: str, seed: int, workdir: Path, options: dict[str, Any]
+) -> dict[str, Any] | None:
     """Grasps planned and hold-tested; ``None`` for other stages."""
     if stage != "grasps":
         return None

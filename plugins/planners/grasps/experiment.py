@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from pydantic import Field
 
+from asmteach.core.config import check_plugin_settings
 from asmteach.core.convex_pieces import pieces_volume_error
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
@@ -66,6 +67,11 @@ class GraspHold(Experiment):
     """Hold rate, distinct grasp count and planning time per library part."""
 
     Params = GraspHoldParams
+
+    def check(self, params: GraspHoldParams) -> None:
+        """The planner's settings by the antipodal planner's model, before any trial."""
+        check_plugin_settings("grasp_planners", "antipodal", params.planner, name_key="params",
+                              settings_key="params.planner")
 
     def run_trial(self, params: GraspHoldParams, seed: int, workdir: Path) -> dict[str, Any]:
         folders = [self.path(f) for f in params.library]

@@ -278,9 +278,16 @@ class HoldSimulator:
         q = [pybullet.getJointState(gripper, j, physicsClientId=c)[0] for j in (0, 1)]
         through = (q[1] - q[0]) < 0.5 * grasp.width
         held = risen >= 0.8 * lift and all(touching) and not through
-        reason = "" if held else (
-            "dropped" if risen < 0.8 * lift else "fingers closed through the part" if through
-            else "lost contact with a finger"
+        reason = (
+            ""
+            if held
+            else (
+                "dropped"
+                if risen < 0.8 * lift
+                else "fingers closed through the part"
+                if through
+                else "lost contact with a finger"
+            )
         )
         return HoldResult(held=held, lift=risen, drift=drift, drift_angle=angle, reason=reason)
 

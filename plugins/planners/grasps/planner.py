@@ -296,7 +296,12 @@ class AntipodalGraspPlanner(GraspPlanner):
         return np.concatenate([R, R_rest]), np.concatenate([pair_idx, pi])
 
     def _contacts(
-        self, part: PartModel, rc: Raycaster, hand: HandSpec, pairs: ContactPairs, R: np.ndarray,
+        self,
+        part: PartModel,
+        rc: Raycaster,
+        hand: HandSpec,
+        pairs: ContactPairs,
+        R: np.ndarray,
         pair_idx: np.ndarray,
     ) -> tuple[Candidates, dict[str, int]]:
         """Candidates passing the contact model (:mod:`.contact`), centred and at their shallowest set-back.
@@ -310,8 +315,9 @@ class AntipodalGraspPlanner(GraspPlanner):
         ``overloaded``), each counted at the centred pad.
         """
         s = self.settings
-        strip = pad_strip(hand, s.pad_grid[0], s.pad_grid[1], inset=s.pad_inset, edge_margin=s.edge_margin,
-                          set_backs=s.set_backs)
+        strip = pad_strip(
+            hand, s.pad_grid[0], s.pad_grid[1], inset=s.pad_inset, edge_margin=s.edge_margin, set_backs=s.set_backs
+        )
         probe = s.compliance + max(s.clearance, 0.002)
         pc = pad_contacts(rc, strip, pairs.p0, pairs.p1, R, pair_idx, s.compliance, probe)
         y = R[:, :, 1]
@@ -373,5 +379,3 @@ def _full_pad_radius(strip: PadStrip) -> float:
     sample points from the centre (the reference of the ``pad`` score)."""
     z = strip.z[strip.windows[0]]
     return float(np.mean(np.hypot(strip.x[:, None], z[None, :] - z.mean())))
-
-

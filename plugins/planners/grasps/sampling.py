@@ -198,8 +198,13 @@ def find_opposite_contacts(
         far[active] = True
     if np.any(far):
         w = np.linalg.norm(last_p[far] - samples.points[far], axis=1)
-        extra = ContactPairs(samples.points[far], samples.normals[far], last_p[far], last_n[far], w,
-                             samples.from_facet[far])
-        pairs = ContactPairs(*(np.concatenate([getattr(pairs, f), getattr(extra, f)]) for f in
-                               ("p0", "n0", "p1", "n1", "width", "from_facet")))
+        extra = ContactPairs(
+            samples.points[far], samples.normals[far], last_p[far], last_n[far], w, samples.from_facet[far]
+        )
+        pairs = ContactPairs(
+            *(
+                np.concatenate([getattr(pairs, f), getattr(extra, f)])
+                for f in ("p0", "n0", "p1", "n1", "width", "from_facet")
+            )
+        )
     return pairs, width

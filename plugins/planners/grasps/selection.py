@@ -148,8 +148,14 @@ def select_grasps(
         j = cand.pair_idx[i]
         off = cand.depth[i] * R[i][:, 2]
         grasps.append(
-            Grasp(id=k, p0=pairs.p0[j] - off, p1=pairs.p1[j] - off, R=R[i], width=float(pairs.width[j]),
-                  score=float(score[i]))
+            Grasp(
+                id=k,
+                p0=pairs.p0[j] - off,
+                p1=pairs.p1[j] - off,
+                R=R[i],
+                width=float(pairs.width[j]),
+                score=float(score[i]),
+            )
         )
     return grasps, n_dup, n_col, np.asarray(kept, dtype=int)
 

@@ -17,9 +17,11 @@ class ScoreWeights(StrictModel):
     com: float = Field(0.5, ge=0.0, description="grasp axis close to the centre of mass (less torque to resist)")
     alignment: float = Field(0.2, ge=0.0, description="contact normals along the grasp axis (deep in the cone)")
     pad: float = Field(
-        0.3, ge=0.0,
+        0.3,
+        ge=0.0,
         description="the worse pad's torsion radius (contact patch, soft pad) over a fully pressed pad's: "
-        "patches beat lines, lines beat points")
+        "patches beat lines, lines beat points",
+    )
 
 
 class AntipodalSettings(StrictModel):
@@ -34,43 +36,62 @@ class AntipodalSettings(StrictModel):
     approach_opening: Literal["full", "pre-shaped"] = Field(
         "full",
         description="the hand on its approach: fully open (the Nextage plugin opens the gripper completely before "
-        "every approach, in execution and in the plan re-check) or pre-shaped to the width plus clearance a side")
+        "every approach, in execution and in the plan re-check) or pre-shaped to the width plus clearance a side",
+    )
     pad_grid: tuple[int, int] = Field(
-        (7, 9), description="pad sample points along the pad's x and z (odd counts put one on the pad centre)")
+        (7, 9), description="pad sample points along the pad's x and z (odd counts put one on the pad centre)"
+    )
     compliance: float = Field(
-        0.0015, gt=0.0, le=0.01,
+        0.0015,
+        gt=0.0,
+        le=0.01,
         description="compressible depth of the soft pads (metres): surface within this depth of the first touch "
-        "is in contact, and no point of the part may stand further in front of the planned contact's pad plane")
+        "is in contact, and no point of the part may stand further in front of the planned contact's pad plane",
+    )
     pad_inset: float = Field(0.0005, ge=0.0, description="pad samples kept this far inside the pad edge")
     edge_margin: float = Field(
-        0.004, ge=0.0,
+        0.004,
+        ge=0.0,
         description="set-backs keep the contacts at least this far inside the pad's fingertip edge (metres): a "
-        "contact on the very edge of the pad slips off it")
+        "contact on the very edge of the pad slips off it",
+    )
     pad_min_support: float = Field(
-        0.0, ge=0.0, le=1.0,
+        0.0,
+        ge=0.0,
+        le=1.0,
         description="optional: share of each pad that must be in contact (1.0: pads fully on a face); 0 leaves it "
-        "to the contact model, which accepts line and point contacts on curved parts")
+        "to the contact model, which accepts line and point contacts on curved parts",
+    )
     hold_safety: float = Field(
-        1.5, ge=0.0,
+        1.5,
+        ge=0.0,
         description="the grasp must bear this multiple of the part's weight and of its moment about the grasp "
-        "axis (soft-finger limit surface, friction mu, force hand.max_force per pad); 0 turns the check off")
+        "axis (soft-finger limit surface, friction mu, force hand.max_force per pad); 0 turns the check off",
+    )
     min_thickness: float = Field(0.002, gt=0.0, description="walls thinner than this mark a thin shell")
     dedup_distance: float = Field(0.005, ge=0.0, description="TCPs closer than this ...")
     dedup_angle_deg: float = Field(15.0, ge=0.0, le=180.0, description="... and rotations closer than this are one")
     max_grasps: int = Field(
-        600, ge=1,
+        600,
+        ge=1,
         description="keep at most this many; each resting pose of the part can use only those approaching from "
-        "above it, about a quarter")
+        "above it, about a quarter",
+    )
     set_backs: bool = Field(
         True,
         description="also offer each orientation at its shallowest set-back (TCP moved back along -z, at most half "
-        "a pad length, in steps of half the pad grid's row spacing); False: pads always centred on the contacts")
+        "a pad length, in steps of half the pad grid's row spacing); False: pads always centred on the contacts",
+    )
     approach_bins: int = Field(
-        32, ge=1, le=1000, description="approach directions (part frame) the kept grasps are spread over")
+        32, ge=1, le=1000, description="approach directions (part frame) the kept grasps are spread over"
+    )
     rest_poses: int = Field(
-        24, ge=0, le=1000,
+        24,
+        ge=0,
+        le=1000,
         description="resting poses of the part (most probable first) that each get, per contact pair, the "
-        "orientation approaching most steeply from above, and their own buckets in the selection")
+        "orientation approaching most steeply from above, and their own buckets in the selection",
+    )
     weights: ScoreWeights = Field(default_factory=ScoreWeights)
     cache: bool = Field(True, description="read and write the on-disk cache")
     cache_dir: str | None = Field(None, description="cache folder; default $ASMTEACH_CACHE_DIR or ~/.cache/asmteach")

@@ -88,8 +88,9 @@ class RRTConnectPlanner(MotionPlanner):
         raw = space.from_path(problem.getSolutionPath())
         valid_batch = getattr(is_valid, "batch", None)
         if cfg.simplify and valid_batch is not None:
-            path, segment_ok = shorten_batched(space, raw, cfg, rng, valid_batch=valid_batch,
-                                               cost_batch=None if cost is None else batch_of(cost))
+            path, segment_ok = shorten_batched(
+                space, raw, cfg, rng, valid_batch=valid_batch, cost_batch=None if cost is None else batch_of(cost)
+            )
             stats.update(batch_calls=segment_ok.calls, batch_states=segment_ok.states)
         else:
             path = finish_path(space, raw, cfg, cost)

@@ -48,7 +48,8 @@ class MotionSettings(StrictModel):
     simplify: bool = Field(
         True,
         description="Shorten the found path: with the batched shortener when is_valid has a batch (see .batch), "
-        "else with OMPL's og.PathSimplifier.")
+        "else with OMPL's og.PathSimplifier.",
+    )
     simplify_max_time: float | None = Field(
         0.5,
         gt=0,
@@ -56,7 +57,8 @@ class MotionSettings(StrictModel):
         "slow with a real robot's collision checks).",
     )
     shortcut_attempts: int = Field(
-        10, ge=0,
+        10,
+        ge=0,
         description="Random shortcuts tried by the batched shortener. Each one kept adds a waypoint, where the "
         "timed path stops: beyond ~10 they cost planning time (70 % of a T-RRT query at 30) and lengthen the "
         "execution, for 2-4 % shorter joint paths",

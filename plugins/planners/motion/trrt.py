@@ -391,8 +391,7 @@ class TRRTPlanner(MotionPlanner):
             return checks.motion(q_start, q_goal) and below(line)
         first = np.zeros(len(line), dtype=bool)
         first[::8] = True
-        return (checks.states(line[first]) and below(line[first]) and checks.states(line[~first])
-                and below(line[~first]))
+        return checks.states(line[first]) and below(line[first]) and checks.states(line[~first]) and below(line[~first])
 
     @staticmethod
     def _check_stats(space: JointSpace, checks: _Checks) -> dict[str, int]:
@@ -416,8 +415,14 @@ class TRRTPlanner(MotionPlanner):
         cfg = self.settings
         if cfg.simplify and checks.valid_batch is not None:
             # Batched checks available: shorten with a few batched calls instead of OMPL's per-state simplifier.
-            path, segment_ok = shorten_batched(space, raw, cfg, rng, valid_batch=checks.valid_batch,
-                                               cost_batch=checks.costs if cost is not None else None)
+            path, segment_ok = shorten_batched(
+                space,
+                raw,
+                cfg,
+                rng,
+                valid_batch=checks.valid_batch,
+                cost_batch=checks.costs if cost is not None else None,
+            )
             checks.batch_calls += segment_ok.calls
             checks.batch_states += segment_ok.states
         else:

@@ -27,6 +27,7 @@ from asmteach.plugins.planners.placements.contact_sheet import render_contact_sh
 
 __all__ = ["asmteach_add_commands", "load_parts"]
 
+
 def load_parts(source: str | Path, *, units: str = "m", com: list[float] | None = None) -> list[PartModel]:
     """Parts named by ``source``: a mesh file, a part YAML or a structure YAML (its two parts)."""
     return load_library_parts(source, units=units, center_of_mass=None if com is None else np.asarray(com, float))
@@ -63,8 +64,10 @@ def _cmd_placements(args: argparse.Namespace) -> int:
                 part.mesh, result.placements, part.center_of_mass, sheet, title=f"{part.name}: stable placements"
             )
         probs = ", ".join(f"{p.probability:.2f}" for p in result.placements)
-        print(f"{part.name}: {len(result.placements)} stable placements (p = {probs}); "
-              f"{len(result.rejected)} refused by the margin test" + ("" if args.no_sheet else f"; sheet {sheet}"))
+        print(
+            f"{part.name}: {len(result.placements)} stable placements (p = {probs}); "
+            f"{len(result.rejected)} refused by the margin test" + ("" if args.no_sheet else f"; sheet {sheet}")
+        )
         if not result.placements:
             print(f"{part.name}: no facet passes d/h >= {args.min_margin}; lower --min-margin to see marginal ones")
     payload: dict[str, Any] = records[0] if len(records) == 1 else {"source": str(args.mesh), "parts": records}
@@ -80,8 +83,14 @@ def asmteach_add_commands(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("mesh", help="mesh file (STL/OBJ/PLY) or a part/structure YAML of the library")
     p.add_argument("--out", required=True, help="placements JSON; the contact sheet PNG goes next to it")
     p.add_argument("--units", choices=["m", "mm"], default="m", help="units of a mesh file (default m)")
-    p.add_argument("--com", type=float, nargs=3, metavar=("X", "Y", "Z"), default=None,
-                   help="centre of mass in the part frame, metres (default: uniform density)")
+    p.add_argument(
+        "--com",
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        default=None,
+        help="centre of mass in the part frame, metres (default: uniform density)",
+    )
     p.add_argument("--min-margin", type=float, default=0.1, help="stability margin d/h (default 0.1)")
     p.add_argument("--angle-tol-deg", type=float, default=1.0, help="coplanar-face tolerance, degrees")
     p.add_argument("--no-sheet", action="store_true", help="skip the contact-sheet PNG")
@@ -94,17 +103,32 @@ def asmteach_check_part(part: PartModel, out_dir: Path | None) -> list[tuple[str
     result = placement_result(part)
     n = len(result.placements)
     if n == 0:
-        return [("placements", "fail", "no facet of the convex hull holds the centre of mass with d/h >= 0.1: "
-                                       "the part cannot rest on the table (check center_of_mass)")]
+        return [
+            (
+                "placements",
+                "fail",
+                "no facet of the convex hull holds the centre of mass with d/h >= 0.1: "
+                "the part cannot rest on the table (check center_of_mass)",
+            )
+        ]
     margins = ", ".join(f"{p.margin:.2f}" for p in result.placements)
     text = f"{n} stable placements (d/h {margins})"
     if out_dir is not None:
-        sheet = render_contact_sheet(part.mesh, result.placements, part.center_of_mass,
-                                     Path(out_dir) / f"{part.name}_placements.png",
-                                     title=f"{part.name}: stable placements")
+        sheet = render_contact_sheet(
+            part.mesh,
+            result.placements,
+            part.center_of_mass,
+            Path(out_dir) / f"{part.name}_placements.png",
+            title=f"{part.name}: stable placements",
+        )
         text += f"; picture {sheet}"
     rows = [("placements", "ok", text)]
     if n == 1:
-        rows.append(("placements", "warn", "only one stable placement: the regrasp graph has no intermediate "
-                                           "rest to turn the part over"))
+        rows.append(
+            (
+                "placements",
+                "warn",
+                "only one stable placement: the regrasp graph has no intermediate rest to turn the part over",
+            )
+        )
     return rows

@@ -75,9 +75,7 @@ def render_contact_sheet(
         ax.set_box_aspect((1, 1, 1))
         ax.view_init(elev=22, azim=-60)
         ax.set_axis_off()
-        ax.set_title(
-            f"#{pl.id}  p={pl.probability:.2f}  d/h={pl.margin:.2f}  C{len(pl.symmetry_yaws)}", fontsize=8
-        )
+        ax.set_title(f"#{pl.id}  p={pl.probability:.2f}  d/h={pl.margin:.2f}  C{len(pl.symmetry_yaws)}", fontsize=8)
     if not placements:
         ax = fig.add_subplot(1, 1, 1)
         ax.text(0.5, 0.5, "no stable placement", ha="center", va="center")

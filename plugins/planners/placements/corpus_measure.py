@@ -24,8 +24,9 @@ __all__ = ["asmteach_measure_part"]
 
 
 @hookimpl
-def asmteach_measure_part(part: PartModel, stage: str, seed: int, workdir: Path,
-                          options: dict[str, Any]) -> dict[str, Any] | None:
+def asmteach_measure_part(
+    part: PartModel, stage: str, seed: int, workdir: Path, options: dict[str, Any]
+) -> dict[str, Any] | None:
     """Placements vs drop test; ``None`` for other stages."""
     if stage != "placements":
         return None
@@ -34,8 +35,9 @@ def asmteach_measure_part(part: PartModel, stage: str, seed: int, workdir: Path,
     t1 = time.perf_counter()
     normals = np.array([down_normal(p.T_table_part) for p in res.placements]).reshape(-1, 3)
     refused = np.array([r.normal for r in res.rejected]).reshape(-1, 3)
-    rep = drop_test(part.mesh, normals, res.center_of_mass, refused_normals=refused,
-                    drops=int(options.get("drops", 30)), seed=seed)
+    rep = drop_test(
+        part.mesh, normals, res.center_of_mass, refused_normals=refused, drops=int(options.get("drops", 30)), seed=seed
+    )
     return {
         "reported": rep.reported,
         "drop_rests": rep.found,

@@ -297,13 +297,13 @@ class StablePlacementCorrector(Corrector):
             "iterations": res.iterations,
             "converged": res.converged,
             "xy_change_mm": shift * 1000.0,
-            "yaw_change_deg": float(
-                np.degrees(geometry.rotation_distance(res.T_table_part, T_snap))
-            ),
+            "yaw_change_deg": float(np.degrees(geometry.rotation_distance(res.T_table_part, T_snap))),
         }
-        com_shift = float(np.linalg.norm(
-            (res.T_table_part[:3, :3] @ com + res.T_table_part[:3, 3] - (T_snap[:3, :3] @ com + T_snap[:3, 3]))[:2]
-        ))
+        com_shift = float(
+            np.linalg.norm(
+                (res.T_table_part[:3, :3] @ com + res.T_table_part[:3, 3] - (T_snap[:3, :3] @ com + T_snap[:3, 3]))[:2]
+            )
+        )
         if com_shift > s.max_refine_shift or res.cost > baseline.cost:
             info.update(applied=False, reason="refinement moved too far or fitted worse; snapped pose kept")
             return T_snap, info

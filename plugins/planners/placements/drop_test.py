@@ -154,8 +154,16 @@ class DropReport:
 class _World:
     """A PyBullet DIRECT world with a plane and one part (its hull, its mass properties)."""
 
-    def __init__(self, hull_vertices: np.ndarray, com: np.ndarray, inertia: np.ndarray, *, friction: float,
-                 rolling_friction: float, time_step: float) -> None:
+    def __init__(
+        self,
+        hull_vertices: np.ndarray,
+        com: np.ndarray,
+        inertia: np.ndarray,
+        *,
+        friction: float,
+        rolling_friction: float,
+        time_step: float,
+    ) -> None:
         self.client = pb.connect(pb.DIRECT)
         c = self.client
         pb.setGravity(0.0, 0.0, -9.81, physicsClientId=c)
@@ -173,16 +181,37 @@ class _World:
         self.body = pb.createMultiBody(1.0, shape, basePosition=[0.0, 0.0, 1.0], physicsClientId=c)
         for b in (self.plane, self.body):
             # No rolling friction by default: it holds a polygon on its edges, where no rest is.
-            pb.changeDynamics(b, -1, lateralFriction=friction, restitution=0.0, rollingFriction=rolling_friction,
-                              spinningFriction=0.0, physicsClientId=c)
-        pb.changeDynamics(self.body, -1, localInertiaDiagonal=np.maximum(evals, 1e-9).tolist(),
-                          linearDamping=_LIGHT_LINEAR, angularDamping=_LIGHT_ANGULAR, physicsClientId=c)
+            pb.changeDynamics(
+                b,
+                -1,
+                lateralFriction=friction,
+                restitution=0.0,
+                rollingFriction=rolling_friction,
+                spinningFriction=0.0,
+                physicsClientId=c,
+            )
+        pb.changeDynamics(
+            self.body,
+            -1,
+            localInertiaDiagonal=np.maximum(evals, 1e-9).tolist(),
+            linearDamping=_LIGHT_LINEAR,
+            angularDamping=_LIGHT_ANGULAR,
+            physicsClientId=c,
+        )
 
     def close(self) -> None:
         pb.disconnect(self.client)
 
-    def settle(self, R: np.ndarray, clearance: float, *, max_steps: int, window: int, still_deg: float,
-               quasi_static: bool = False) -> tuple[np.ndarray, bool]:
+    def settle(
+        self,
+        R: np.ndarray,
+        clearance: float,
+        *,
+        max_steps: int,
+        window: int,
+        still_deg: float,
+        quasi_static: bool = False,
+    ) -> tuple[np.ndarray, bool]:
         """Release the part with rotation ``R`` (part frame -> world), lowest point ``clearance`` m up.
 
         Returns the settled rotation (part frame -> world) and whether it came to rest: its
@@ -249,8 +278,9 @@ class _World:
     def _place(self, R_link: np.ndarray, clearance: float) -> None:
         """Put the part at rest with rotation ``R_link`` (link frame -> world), lowest point ``clearance`` m up."""
         z = -float(np.min(self.local @ R_link[2])) + clearance
-        pb.resetBasePositionAndOrientation(self.body, [0.0, 0.0, z], Rotation.from_matrix(R_link).as_quat().tolist(),
-                                           physicsClientId=self.client)
+        pb.resetBasePositionAndOrientation(
+            self.body, [0.0, 0.0, z], Rotation.from_matrix(R_link).as_quat().tolist(), physicsClientId=self.client
+        )
         pb.resetBaseVelocity(self.body, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=self.client)
 
 
@@ -334,9 +364,16 @@ def drop_test(
     normals = np.asarray(placement_normals, dtype=float).reshape(-1, 3)
     normals = normals / np.linalg.norm(normals, axis=1, keepdims=True) if len(normals) else normals
     extent = scale * float(np.ptp(hull.vertices, axis=0).max())  # of the simulated part, metres
-    world = _World(hull.vertices * scale, com * scale, inertia, friction=friction,
-                   rolling_friction=rolling_friction, time_step=time_step)
+    world = _World(
+        hull.vertices * scale,
+        com * scale,
+        inertia,
+        friction=friction,
+        rolling_friction=rolling_friction,
+        time_step=time_step,
+    )
     steps = dict(max_steps=int(max_seconds / time_step), window=int(1.0 / time_step), still_deg=0.1)
+
     def release(n: np.ndarray, tilt_deg: float) -> np.ndarray:
         """Down directions (part frame, ``(directions, 3)``) where the part settles, released resting on
         ``n`` tilted by ``tilt_deg`` about each of ``directions`` horizontal axes (seeded phase)."""

@@ -58,9 +58,7 @@ def _normals_ours(placements: list[Any]) -> np.ndarray:
     return np.array([p.T_table_part[:3, :3].T @ [0.0, 0.0, -1.0] for p in placements]).reshape(-1, 3)
 
 
-def _best_times(
-    fns: dict[str, Any], repeats: int
-) -> tuple[dict[str, float], dict[str, float], dict[str, Any]]:
+def _best_times(fns: dict[str, Any], repeats: int) -> tuple[dict[str, float], dict[str, float], dict[str, Any]]:
     """Best wall time and best process CPU time (s) of each callable over ``repeats`` rounds, and its output.
 
     The callables run interleaved (one of each per round), so a burst of load
@@ -82,7 +80,13 @@ def _best_times(
 
 
 def compare_mesh(
-    name: str, source: str, part: PartModel, *, min_probability: float, min_margin: float, match_tol_deg: float,
+    name: str,
+    source: str,
+    part: PartModel,
+    *,
+    min_probability: float,
+    min_margin: float,
+    match_tol_deg: float,
     repeats: int,
 ) -> dict[str, Any]:
     """Compare both planners on one part; returns a flat record with lists of reasons."""
@@ -154,7 +158,8 @@ def compare_mesh(
             f"(d/h {ms.min():.3f}-{ms.max():.3f} < {min_margin})"
         )
     tm_p05_stable = sum(
-        1 for n, p in zip(n_tm, tm_p, strict=True)
+        1
+        for n, p in zip(n_tm, tm_p, strict=True)
         if p >= min_probability and evaluate_direction(hull_v, com, n).margin >= min_margin
     )
     ours_only = [
@@ -211,9 +216,13 @@ class PlacementsVsTrimesh(Experiment):
         """Compare on every mesh; per-mesh records go to ``workdir/meshes.csv`` and the row's ``meshes``."""
         records = [
             compare_mesh(
-                name, source, part,
-                min_probability=params.min_probability, min_margin=params.min_margin,
-                match_tol_deg=params.match_tol_deg, repeats=params.repeats,
+                name,
+                source,
+                part,
+                min_probability=params.min_probability,
+                min_margin=params.min_margin,
+                match_tol_deg=params.match_tol_deg,
+                repeats=params.repeats,
             )
             for name, source, part in self._meshes(params)
         ]
@@ -242,9 +251,26 @@ class PlacementsVsTrimesh(Experiment):
         if not records:
             return []
         cols = [
-            "mesh", "source", "faces", "ours", "trimesh", "trimesh_p05_stable", "matched", "missed",
-            "ours_unstable", "trimesh_com_outside", "trimesh_below_margin", "ours_only", "max_prob_diff",
-            "ms_ours", "ms_ours_no_symmetry", "ms_trimesh", "speedup", "cpu_ms_ours", "cpu_ms_trimesh", "cpu_speedup",
+            "mesh",
+            "source",
+            "faces",
+            "ours",
+            "trimesh",
+            "trimesh_p05_stable",
+            "matched",
+            "missed",
+            "ours_unstable",
+            "trimesh_com_outside",
+            "trimesh_below_margin",
+            "ours_only",
+            "max_prob_diff",
+            "ms_ours",
+            "ms_ours_no_symmetry",
+            "ms_trimesh",
+            "speedup",
+            "cpu_ms_ours",
+            "cpu_ms_trimesh",
+            "cpu_speedup",
         ]
         t_ours = sum(r["ms_ours"] for r in records)
         t_core = sum(r["ms_ours_no_symmetry"] for r in records)

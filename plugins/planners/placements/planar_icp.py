@@ -95,9 +95,7 @@ class ModelSurface:
         hit = self.scene.cast_rays(o3d.core.Tensor(rays.astype(np.float32)))["t_hit"].numpy()
         return idx[hit > dist[idx] - 5e-4]  # float32 ray casting: half a millimetre of slack
 
-    def visible(
-        self, T_frame_part: np.ndarray, eye: np.ndarray, max_incidence: float = np.radians(70.0)
-    ) -> np.ndarray:
+    def visible(self, T_frame_part: np.ndarray, eye: np.ndarray, max_incidence: float = np.radians(70.0)) -> np.ndarray:
         """The visible samples (see :meth:`visible_index`), ``(k, 3)`` in the frame of ``T_frame_part``."""
         idx = self.visible_index(T_frame_part, eye, max_incidence)
         return self.samples[idx] @ T_frame_part[:3, :3].T + T_frame_part[:3, 3]

@@ -80,8 +80,9 @@ class TransferResult:
 
 
 def _screen_settings(settings: AssemblySettings) -> ScreenSettings:
-    return ScreenSettings(max_candidates=settings.max_candidates, min_down=settings.min_down,
-                          pregrasp_distance=settings.pregrasp_distance)
+    return ScreenSettings(
+        max_candidates=settings.max_candidates, min_down=settings.min_down, pregrasp_distance=settings.pregrasp_distance
+    )
 
 
 def feasible_grasps_at(
@@ -156,8 +157,9 @@ def plan_transfer(
         return [start, evaluate(goal.slot, goal.on_table, prefer=_grasp_ids([start]))]
 
     def graph(layers: list[GraspFeasibility]) -> nx.Graph:
-        return build_regrasp_graph(layers, regrasp_penalty=settings.regrasp_penalty,
-                                   motion_weight=settings.motion_weight)
+        return build_regrasp_graph(
+            layers, regrasp_penalty=settings.regrasp_penalty, motion_weight=settings.motion_weight
+        )
 
     layers = start_and_goal()
     stats: dict[str, Any] = {"feasible": {"start": len(layers[0].solutions), "goal": len(layers[1].solutions)}}
@@ -172,10 +174,10 @@ def plan_transfer(
         screens = [screen_slot(slot, grasps, collider, robot.hand, screen) for slot in slots]
         total = Counter(g.id for passed, _ in screens for g in passed)
         reset_world(robot, world)  # a failed realisation may have left other obstacles or a held part
-        shared = [{gid: n - (gid in {g.id for g in passed}) for gid, n in total.items()}
-                  for passed, _ in screens]  # per slot: the other slots passing each grasp
-        return evaluate_slots(robot, slots, screens, arms, settings=screen, prefer=prefer, shared=shared,
-                              seeds=seeds)
+        shared = [
+            {gid: n - (gid in {g.id for g in passed}) for gid, n in total.items()} for passed, _ in screens
+        ]  # per slot: the other slots passing each grasp
+        return evaluate_slots(robot, slots, screens, arms, settings=screen, prefer=prefer, shared=shared, seeds=seeds)
 
     banned: list[tuple[Any, Any]] = []
     last_reason: str | None = None
@@ -211,21 +213,33 @@ def plan_transfer(
             slots = list(middle_slots(True))
             layers = start_and_goal()
             layers += middle_layers(slots, _grasp_ids(layers))
-            stats["feasible"] = {"start": len(layers[0].solutions), "goal": len(layers[1].solutions),
-                                 "middle": sum(len(f.solutions) for f in layers[2:]), "widened": True}
+            stats["feasible"] = {
+                "start": len(layers[0].solutions),
+                "goal": len(layers[1].solutions),
+                "middle": sum(len(f.solutions) for f in layers[2:]),
+                "widened": True,
+            }
             G = graph(layers)
             stats["graph_seconds"] += time.perf_counter() - tg
             if progress:
-                progress(f"{part.name}: no keyframe path; all {len(slots)} placement slots, "
-                         f"{screen.max_candidates} grasps solved per slot")
+                progress(
+                    f"{part.name}: no keyframe path; all {len(slots)} placement slots, "
+                    f"{screen.max_candidates} grasps solved per slot"
+                )
             continue
         if not search.success and widened and relocations and settings.max_placements > 0:
             # Where the part starts, the arm may reach it in one way and not in the other (at the edge of
             # its reach): the same placements, further toward the goal and clear of the other obstacles.
             tg = time.perf_counter()
             fraction = relocations.pop(0)
-            moved = relocated_slots(slots, start_xy, start_xy + fraction * (goal_xy - start_xy), part, collider,
-                                    settings.relocation_clearance)
+            moved = relocated_slots(
+                slots,
+                start_xy,
+                start_xy + fraction * (goal_xy - start_xy),
+                part,
+                collider,
+                settings.relocation_clearance,
+            )
             stats.setdefault("relocations", []).append(fraction)
             if moved:
                 layers += middle_layers(moved, _grasp_ids(layers))
@@ -234,8 +248,11 @@ def plan_transfer(
             stats["graph_seconds"] += time.perf_counter() - tg
             if progress:
                 where = f"{fraction:g} of the way to the goal"
-                progress(f"{part.name}: no keyframe path; {len(moved)} placement slots added {where}" if moved
-                         else f"{part.name}: placements {where} would come too near an obstacle; skipped")
+                progress(
+                    f"{part.name}: no keyframe path; {len(moved)} placement slots added {where}"
+                    if moved
+                    else f"{part.name}: placements {where} would come too near an obstacle; skipped"
+                )
             continue
         stats["graph_nodes"] = G.number_of_nodes() - 2
         stats["graph_edges"] = G.number_of_edges()
@@ -243,8 +260,9 @@ def plan_transfer(
             reason = search.reason or "no keyframe path"
             if last_reason is not None:
                 reason += f"; last motion failure: {last_reason}"
-            return TransferResult(False, search=search, graph=G, reason=reason, stats=_rounded(stats),
-                                  keyframes=_why_layers(layers))
+            return TransferResult(
+                False, search=search, graph=G, reason=reason, stats=_rounded(stats), keyframes=_why_layers(layers)
+            )
         attempts += 1
         tm = time.perf_counter()
         try:
@@ -263,22 +281,30 @@ def plan_transfer(
                 progress(f"{part.name}: {fail.reason}; searching again")
             if attempts >= settings.max_attempts:
                 return TransferResult(
-                    False, search=search, graph=G, stats=_rounded(stats),
+                    False,
+                    search=search,
+                    graph=G,
+                    stats=_rounded(stats),
                     reason=f"{attempts} keyframe sequences tried (max_attempts); last failure: {last_reason}",
                 )
             if time.perf_counter() - t0 > settings.time_budget:
                 stats["wall_clock_cuts"].append(f"time budget of {settings.time_budget:.0f} s")
                 return TransferResult(
-                    False, search=search, graph=G, stats=_rounded(stats),
+                    False,
+                    search=search,
+                    graph=G,
+                    stats=_rounded(stats),
                     reason=f"time budget of {settings.time_budget:.0f} s (wall clock) spent after {attempts} "
                     f"keyframe sequences; last failure: {last_reason}",
                 )
             continue
         stats["motion_seconds"] += time.perf_counter() - tm
-        stats.update(regrasps=search.regrasps, attempts=attempts, seconds=time.perf_counter() - t0,
-                     min_clearance_m=min_clear)
-        return TransferResult(True, steps=steps, search=search, graph=G, stats=_rounded(stats), q_end=q_end,
-                              keyframes=keyframes)
+        stats.update(
+            regrasps=search.regrasps, attempts=attempts, seconds=time.perf_counter() - t0, min_clearance_m=min_clear
+        )
+        return TransferResult(
+            True, steps=steps, search=search, graph=G, stats=_rounded(stats), q_end=q_end, keyframes=keyframes
+        )
 
 
 def _grasp_ids(layers: Sequence[GraspFeasibility]) -> set[int]:

@@ -46,8 +46,7 @@ class AssemblyPlanningExperiment(Experiment):
     """Success, time per stage, regrasps, path length and clearance of whole two-part plans."""
 
     Params = AssemblyPlanningParams
-    plot_metrics = ("success", "recheck_ok", "seconds", "motion_seconds", "regrasps", "path_length",
-                    "min_clearance_mm")
+    plot_metrics = ("success", "recheck_ok", "seconds", "motion_seconds", "regrasps", "path_length", "min_clearance_mm")
 
     def run_trial(self, params: AssemblyPlanningParams, seed: int, workdir: Path) -> dict[str, Any]:
         task = load_structure(self.path(params.structure))
@@ -58,8 +57,9 @@ class AssemblyPlanningExperiment(Experiment):
             motion = registry.create("motion_planners", params.motion_planner, params.motion_settings, seed=seed)
             planner = registry.create("assembly_planners", "regrasp", params.planner_settings, seed=seed)
             T_a, T_b = random_start_poses([a, b], 0.0, params.scene, np.random.default_rng([seed, 11]))
-            problem = AssemblyProblem(a, b, task, T_a, T_b, grasps.plan(a, robot.hand), grasps.plan(b, robot.hand),
-                                      TablePlane(height=0.0))
+            problem = AssemblyProblem(
+                a, b, task, T_a, T_b, grasps.plan(a, robot.hand), grasps.plan(b, robot.hand), TablePlane(height=0.0)
+            )
             t0 = time.perf_counter()
             res = planner.plan(problem, robot, motion)
             total = time.perf_counter() - t0
@@ -75,14 +75,22 @@ class AssemblyPlanningExperiment(Experiment):
             row["regrasps"] = sum(row.get(f"{p}_regrasps", 0) for p in ("A", "B"))
             if res.success:
                 row["execution_seconds"] = stats.get("execution_seconds")
-                row["path_length"] = float(sum(
-                    np.linalg.norm(np.diff(np.asarray(s.trajectory.positions), axis=0), axis=1).sum()
-                    for s in res.plan.segments if s.trajectory is not None))
+                row["path_length"] = float(
+                    sum(
+                        np.linalg.norm(np.diff(np.asarray(s.trajectory.positions), axis=0), axis=1).sum()
+                        for s in res.plan.segments
+                        if s.trajectory is not None
+                    )
+                )
                 mins = [(stats.get(p) or {}).get("min_clearance_m", np.nan) for p in ("A", "B")]
                 row["min_clearance_mm"] = 1000.0 * float(np.nanmin(mins))
                 if params.recheck:
-                    chk = robot.verify_plan(res.plan, {a.name: (a, T_a), b.name: (b, T_b)}, problem.table,
-                                            resolution=params.recheck_resolution)
+                    chk = robot.verify_plan(
+                        res.plan,
+                        {a.name: (a, T_a), b.name: (b, T_b)},
+                        problem.table,
+                        resolution=params.recheck_resolution,
+                    )
                     row["recheck_ok"] = bool(chk.ok)
                     row["recheck_collisions"] = len(chk.collisions)
                     row["recheck_min_distance_mm"] = 1000.0 * float(chk.min_distance_m)

@@ -121,8 +121,16 @@ def evaluate_slot(
     seeds: dict[str, np.ndarray] | None = None,
 ) -> GraspFeasibility:
     """:func:`evaluate_slots` of one slot."""
-    return evaluate_slots(robot, [slot], [screened], arms, settings=settings, prefer=prefer,
-                          shared=None if shared is None else [shared], seeds=seeds)[0]
+    return evaluate_slots(
+        robot,
+        [slot],
+        [screened],
+        arms,
+        settings=settings,
+        prefer=prefer,
+        shared=None if shared is None else [shared],
+        seeds=seeds,
+    )[0]
 
 
 def evaluate_slots(
@@ -185,8 +193,9 @@ def evaluate_slots(
                 out[jobs[i][0]].rejected[keys[i]] = "ik: pre-grasp pose unreachable"
             else:
                 reach.append((i, p.q))
-        clear = _collision_free(robot, arm, [i for i, _ in reach], [q for _, q in reach], out, jobs, keys,
-                                "at the pre-grasp pose")
+        clear = _collision_free(
+            robot, arm, [i for i, _ in reach], [q for _, q in reach], out, jobs, keys, "at the pre-grasp pose"
+        )
         for i in clear:
             out[jobs[i][0]].solutions[keys[i]] = np.asarray(res[i].q, float)
     return out

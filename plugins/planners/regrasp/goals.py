@@ -86,8 +86,9 @@ def ranked_assembly_goals(
     ranked: list[tuple[float, AssemblyGoal]] = []
     T_xy = compose(from_rotation(np.eye(3), [xy[0], xy[1], table_height]), rot_z(yaw))
     for p in placements_a:
-        goal = assembly_goal_at(part_a, part_b, task, T_xy @ p.T_table_part, p.id, retract=retract,
-                                vertical_snap=vertical_snap)
+        goal = assembly_goal_at(
+            part_a, part_b, task, T_xy @ p.T_table_part, p.id, retract=retract, vertical_snap=vertical_snap
+        )
         low_b = min(_lowest(part_b, goal.T_world_b), _lowest(part_b, goal.T_world_b_pre))
         if low_b < table_height - 1e-4:
             continue
@@ -114,8 +115,17 @@ def choose_assembly_goal(
     vertical_snap: float = VERTICAL_SNAP,
 ) -> AssemblyGoal:
     """The first of :func:`ranked_assembly_goals`: B's insertion most nearly straight down."""
-    return ranked_assembly_goals(part_a, part_b, task, placements_a, xy=xy, yaw=yaw, table_height=table_height,
-                                 retract=retract, vertical_snap=vertical_snap)[0]
+    return ranked_assembly_goals(
+        part_a,
+        part_b,
+        task,
+        placements_a,
+        xy=xy,
+        yaw=yaw,
+        table_height=table_height,
+        retract=retract,
+        vertical_snap=vertical_snap,
+    )[0]
 
 
 def assembly_goal_at(

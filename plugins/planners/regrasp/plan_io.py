@@ -167,11 +167,13 @@ def to_plan(
             timed = time_parametrize(path, v_max, acceleration)
         else:
             speed = _path_speed(robot, st.arm, path, insertion_speed) if kind == "insertion" else None
-            timed = time_optimal(path, v_max, acceleration, max_deviation=max_deviation, path_speed=speed,
-                                 report=blends)
+            timed = time_optimal(
+                path, v_max, acceleration, max_deviation=max_deviation, path_speed=speed, report=blends
+            )
         durations.append(timed.duration)
-        segments.append(PlanSegment(label=st.label, trajectory=to_trajectory(timed, st.arm, robot.joint_names(st.arm)),
-                                    kind=kind))
+        segments.append(
+            PlanSegment(label=st.label, trajectory=to_trajectory(timed, st.arm, robot.joint_names(st.arm)), kind=kind)
+        )
     all_stats = dict(stats or {})
     all_stats["execution_seconds"] = round(float(sum(durations)), 3)
     all_stats["robot_seconds"] = robot_seconds(durations, kinds)
@@ -241,8 +243,15 @@ def render_regrasp_graph(G: nx.Graph, path_nodes: Sequence[Any], out: Path, *, t
         groups.setdefault((arm_colors.get(n[2], "#7f7f7f"), n in on_path_nodes), []).append(pos[n])
     for (color, on_path), xy in groups.items():
         xs, ys = zip(*xy, strict=True)
-        ax.scatter(xs, ys, s=40 if on_path else 14, c=color,
-                   edgecolors="#d62728" if on_path else "none", linewidths=1.5, zorder=5)
+        ax.scatter(
+            xs,
+            ys,
+            s=40 if on_path else 14,
+            c=color,
+            edgecolors="#d62728" if on_path else "none",
+            linewidths=1.5,
+            zorder=5,
+        )
     ax.autoscale_view()  # collections added with add_collection do not update the data limits by themselves
     ax.set_xticks(range(len(slots)))
     ax.set_xticklabels(slots, rotation=35, ha="right", fontsize=8)

@@ -60,29 +60,50 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         with _arms_kept(robot):
             return self._plan(problem, robot, motion_planner, progress)
 
-    def _plan(self, problem: AssemblyProblem, robot: Robot, motion_planner: MotionPlanner,
-              progress: Callable[[str], None] | None) -> AssemblyResult:
+    def _plan(
+        self,
+        problem: AssemblyProblem,
+        robot: Robot,
+        motion_planner: MotionPlanner,
+        progress: Callable[[str], None] | None,
+    ) -> AssemblyResult:
         s = self.settings
         t0 = time.perf_counter()
         a, b, h = problem.part_a, problem.part_b, problem.table.height
         table = table_obstacle(robot, h)
         goal, goal_grasps = self._choose_goal(problem, robot, table, progress)
         q_home = {arm: robot.home(arm) for arm in robot.arms}
-        details: dict = {"goal_placement_a": goal.placement_id, "v_world": goal.v_world.tolist(),
-                         "goal_grasps_b": goal_grasps}
-        result = AssemblyResult(False, Plan(), T_world_a_goal=goal.T_world_a, T_world_b_goal=goal.T_world_b,
-                                details=details)
+        details: dict = {
+            "goal_placement_a": goal.placement_id,
+            "v_world": goal.v_world.tolist(),
+            "goal_grasps_b": goal_grasps,
+        }
+        result = AssemblyResult(
+            False, Plan(), T_world_a_goal=goal.T_world_a, T_world_b_goal=goal.T_world_b, details=details
+        )
 
         # Part A: B lies where it was detected and is in the way.
         world_a = [table, Obstacle(b.name, b.mesh, problem.T_world_b)]
         start_a = problem.T_world_a[:3, 3]
         res_a = plan_transfer(
-            robot, motion_planner, a, problem.grasps_a,
+            robot,
+            motion_planner,
+            a,
+            problem.grasps_a,
             T_start=problem.T_world_a,
             goal=PlaceGoal(PoseSlot("goal", "goal", goal.T_world_a), np.array([0.0, 0.0, s.lift])),
-            middle_slots=lambda every: placement_slots(compute_placements(a), start_a[:2], h, s, every=every,
-                                                       first=(problem.T_world_a[:3, :3], goal.T_world_a[:3, :3])),
-            world=world_a, q_now=q_home, settings=s, progress=progress,
+            middle_slots=lambda every: placement_slots(
+                compute_placements(a),
+                start_a[:2],
+                h,
+                s,
+                every=every,
+                first=(problem.T_world_a[:3, :3], goal.T_world_a[:3, :3]),
+            ),
+            world=world_a,
+            q_now=q_home,
+            settings=s,
+            progress=progress,
         )
         details["a"] = res_a
         if not res_a.success:
@@ -96,30 +117,43 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         result.success = True
         return result
 
-    def _choose_goal(self, problem: AssemblyProblem, robot: Robot, table: Obstacle,
-                     progress: Callable[[str], None] | None) -> tuple[AssemblyGoal, int]:
+    def _choose_goal(
+        self, problem: AssemblyProblem, robot: Robot, table: Obstacle, progress: Callable[[str], None] | None
+    ) -> tuple[AssemblyGoal, int]:
         """A's goal: the best ranked at which ``min_goal_grasps`` of B's grasps are feasible when assembled (else
         the one with the most), and that number."""
         s, a, b, h = self.settings, problem.part_a, problem.part_b, problem.table.height
         goals = ranked_assembly_goals(
-            a, b, problem.task, compute_placements(a), xy=s.goal_xy, yaw=s.goal_yaw, table_height=h, retract=s.retract,
+            a,
+            b,
+            problem.task,
+            compute_placements(a),
+            xy=s.goal_xy,
+            yaw=s.goal_yaw,
+            table_height=h,
+            retract=s.retract,
             vertical_snap=float(np.radians(s.vertical_snap_deg)),
         )
         if s.min_goal_grasps == 0:
             return goals[0], -1
         best: tuple[AssemblyGoal, int] | None = None
         for goal in goals:
-            n = len(feasible_grasps_at(robot, b, problem.grasps_b, goal.T_world_b,
-                                       [table, Obstacle(a.name, a.mesh, goal.T_world_a)], s))
+            n = len(
+                feasible_grasps_at(
+                    robot, b, problem.grasps_b, goal.T_world_b, [table, Obstacle(a.name, a.mesh, goal.T_world_a)], s
+                )
+            )
             if best is None or n > best[1]:
                 best = (goal, n)
             if n >= s.min_goal_grasps:
                 break
         assert best is not None  # ranked_assembly_goals raises rather than return none
         if progress and best[0] is not goals[0]:
-            progress(f"{a.name}: goal placement {best[0].placement_id}, not {goals[0].placement_id} (insertion "
-                     f"{np.degrees(np.arccos(np.clip(-best[0].v_world[2], -1, 1))):.0f} deg from vertical): "
-                     f"{best[1]} grasps of {b.name} are feasible when assembled there")
+            progress(
+                f"{a.name}: goal placement {best[0].placement_id}, not {goals[0].placement_id} (insertion "
+                f"{np.degrees(np.arccos(np.clip(-best[0].v_world[2], -1, 1))):.0f} deg from vertical): "
+                f"{best[1]} grasps of {b.name} are feasible when assembled there"
+            )
         return best
 
     def plan_insertion(
@@ -134,10 +168,22 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         """B's segments only, into A standing at ``T_world_a`` (seen there); the arms start where they are now."""
         s = self.settings
         t0 = time.perf_counter()
-        goal = assembly_goal_at(problem.part_a, problem.part_b, problem.task, T_world_a, -1, retract=s.retract,
-                                vertical_snap=float(np.radians(s.vertical_snap_deg)))
-        result = AssemblyResult(False, Plan(), T_world_a_goal=goal.T_world_a, T_world_b_goal=goal.T_world_b,
-                                details={"v_world": goal.v_world.tolist()})
+        goal = assembly_goal_at(
+            problem.part_a,
+            problem.part_b,
+            problem.task,
+            T_world_a,
+            -1,
+            retract=s.retract,
+            vertical_snap=float(np.radians(s.vertical_snap_deg)),
+        )
+        result = AssemblyResult(
+            False,
+            Plan(),
+            T_world_a_goal=goal.T_world_a,
+            T_world_b_goal=goal.T_world_b,
+            details={"v_world": goal.v_world.tolist()},
+        )
         with _arms_kept(robot) as q_now:
             res_b = self._plan_b(problem, goal, robot, motion_planner, q_now, progress)
         result.details["b"] = res_b
@@ -147,8 +193,15 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         result.success = True
         return result
 
-    def _plan_b(self, problem: AssemblyProblem, goal: AssemblyGoal, robot: Robot, motion_planner: MotionPlanner,
-                q_now: dict[str, np.ndarray], progress: Callable[[str], None] | None) -> TransferResult:
+    def _plan_b(
+        self,
+        problem: AssemblyProblem,
+        goal: AssemblyGoal,
+        robot: Robot,
+        motion_planner: MotionPlanner,
+        q_now: dict[str, np.ndarray],
+        progress: Callable[[str], None] | None,
+    ) -> TransferResult:
         """B from where it lies to the assembled pose; A stands at its goal, B may touch it (and the table) only on
         the insertion."""
         s, a, b, h = self.settings, problem.part_a, problem.part_b, problem.table.height
@@ -156,13 +209,26 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         start_b = problem.T_world_b[:3, 3]
         back = goal.T_world_b_pre[:3, 3] - goal.T_world_b[:3, 3]  # the retraction, along -v_world
         return plan_transfer(
-            robot, motion_planner, b, problem.grasps_b,
+            robot,
+            motion_planner,
+            b,
+            problem.grasps_b,
             T_start=problem.T_world_b,
-            goal=PlaceGoal(PoseSlot("assembled", "goal", goal.T_world_b), back, touch=(a.name, "table"),
-                           on_table=False),
-            middle_slots=lambda every: placement_slots(compute_placements(b), start_b[:2], h, s, every=every,
-                                                       first=(problem.T_world_b[:3, :3], goal.T_world_b[:3, :3])),
-            world=world_b, q_now=q_now, settings=s, progress=progress,
+            goal=PlaceGoal(
+                PoseSlot("assembled", "goal", goal.T_world_b), back, touch=(a.name, "table"), on_table=False
+            ),
+            middle_slots=lambda every: placement_slots(
+                compute_placements(b),
+                start_b[:2],
+                h,
+                s,
+                every=every,
+                first=(problem.T_world_b[:3, :3], goal.T_world_b[:3, :3]),
+            ),
+            world=world_b,
+            q_now=q_now,
+            settings=s,
+            progress=progress,
         )
 
     def _timed(self, robot: Robot, parts: list[tuple[str, str, TransferResult]], t0: float) -> Plan:
@@ -175,14 +241,22 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
             keyframes += [dict(k, part=key) for k in res.keyframes]
             stats[key] = res.stats
         stats["planning_seconds"] = round(time.perf_counter() - t0, 3)
-        plan = to_plan(steps, robot, self.settings.acceleration, keyframes=keyframes, stats=stats,
-                       timing=self.settings.timing, insertion_speed=self.settings.insertion_speed)
+        plan = to_plan(
+            steps,
+            robot,
+            self.settings.acceleration,
+            keyframes=keyframes,
+            stats=stats,
+            timing=self.settings.timing,
+            insertion_speed=self.settings.insertion_speed,
+        )
         for seg, name in zip(plan.segments, owner, strict=True):  # one segment per step
             seg.part = name
         return plan
 
-    def _fail(self, result: AssemblyResult, res: TransferResult, who: str, t0: float, robot: Robot,
-              keep_plan: bool = False) -> AssemblyResult:
+    def _fail(
+        self, result: AssemblyResult, res: TransferResult, who: str, t0: float, robot: Robot, keep_plan: bool = False
+    ) -> AssemblyResult:
         result.reason = f"{who}: {res.reason}"
         result.failed_at = who
         if not keep_plan:
@@ -198,7 +272,9 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
             if isinstance(res, TransferResult) and res.graph is not None:
                 path = Path(out_dir) / f"regrasp_graph_{key.upper()}.png"
                 out[f"regrasp_graph_{key.upper()}"] = render_regrasp_graph(
-                    res.graph, res.search.nodes if res.search is not None and res.search.success else [], path,
+                    res.graph,
+                    res.search.nodes if res.search is not None and res.search.success else [],
+                    path,
                     title=f"regrasp graph of part {key.upper()}",
                 )
         return out

@@ -210,8 +210,17 @@ def realise_keyframes(
         if bool(robot.in_collision(arm, np.asarray(q_b, float)[None, :])[0]):
             # No motion to it can succeed, whatever edge leads there: ban the node.
             raise MotionFailure(edge, f"{what}: {FailureKind.GOAL_INVALID.value}", node=edge[1])
-        queries.append(_FreeMotion(len(steps), arm, np.asarray(q_a, float), np.asarray(q_b, float), edge, what,
-                                   _Scene(extra, held, dict(q_set))))
+        queries.append(
+            _FreeMotion(
+                len(steps),
+                arm,
+                np.asarray(q_a, float),
+                np.asarray(q_b, float),
+                edge,
+                what,
+                _Scene(extra, held, dict(q_set)),
+            )
+        )
         steps.append(Step(label, "path", arm))
 
     i = 0
@@ -239,8 +248,14 @@ def realise_keyframes(
             put(a, q_cur[a])
         for other in robot.arms:
             if other != arm and not np.allclose(q_cur[other], robot.home(other)):
-                free(other, q_cur[other], robot.home(other), (into, pick),
-                     f"{other} arm home before the {arm} arm picks", f"{other} arm home")
+                free(
+                    other,
+                    q_cur[other],
+                    robot.home(other),
+                    (into, pick),
+                    f"{other} arm home before the {arm} arm picks",
+                    f"{other} arm home",
+                )
                 q_cur[other] = robot.home(other)
                 put(other, q_cur[other])
         # 1. free motion to the pre-grasp pose; the part is an obstacle where it lies
@@ -248,8 +263,14 @@ def realise_keyframes(
         pre = robot.ik(arm, approach_offset(T_grasp, settings.pregrasp_distance), q_seed=G.nodes[pick]["q"])
         if not pre.success or pre.q is None or getattr(pre, "flipped", False):
             raise MotionFailure((into, pick), f"pre-grasp pose at {pick[0]} has no IK solution", node=pick)
-        free(arm, q_cur[arm], pre.q, (into, pick), f"motion to the pre-grasp at {pick[0]}",
-             f"move to pre-grasp {vid} of {part.name} at {pick[0]}")
+        free(
+            arm,
+            q_cur[arm],
+            pre.q,
+            (into, pick),
+            f"motion to the pre-grasp at {pick[0]}",
+            f"move to pre-grasp {vid} of {part.name} at {pick[0]}",
+        )
         keyframes.append({"name": f"pregrasp_{pick[0]}", "arm": arm, "q": np.asarray(pre.q).tolist()})
         # 2. straight approach without the part as obstacle (the fingers go around it)
         extra = ()
@@ -258,16 +279,32 @@ def realise_keyframes(
         steps.append(Step(f"approach grasp {vid}", "path", arm, down))
         keyframes.append({"name": f"grasp_{pick[0]}", "arm": arm, "q": down[-1].tolist()})
         width = grasps[vid // 2].width
-        steps.append(Step(f"close on {part.name}", "gripper", arm,
-                          event=GripperEvent(arm=arm, action="close", width=width, attach=part.name)))
+        steps.append(
+            Step(
+                f"close on {part.name}",
+                "gripper",
+                arm,
+                event=GripperEvent(arm=arm, action="close", width=width, attach=part.name),
+            )
+        )
         T_tcp_now = robot.fk(arm, down[-1])
         held = (arm, part, np.linalg.inv(T_tcp_now) @ slot_pick.T_world_part, width)
         robot.attach(arm, part, held[2], width=width)
         # 3. lift straight up (the part leaves the table it touched)
         T_lift = T_tcp_now.copy()
         T_lift[2, 3] += settings.lift
-        up = _line(robot, chk, arm, down[-1], T_lift, settings, (pick, nodes[i + 1]), f"lift at {pick[0]}",
-                   ignore=("table",), node=pick)
+        up = _line(
+            robot,
+            chk,
+            arm,
+            down[-1],
+            T_lift,
+            settings,
+            (pick, nodes[i + 1]),
+            f"lift at {pick[0]}",
+            ignore=("table",),
+            node=pick,
+        )
         steps.append(Step(f"lift {part.name}", "path", arm, up))
         # 4. carry to the start of the final straight move
         T_place_tcp = slot_place.T_world_part @ variant_tcp(grasps, vid)
@@ -277,20 +314,41 @@ def realise_keyframes(
         above = robot.ik(arm, T_above, q_seed=G.nodes[place]["q"])
         if not above.success or above.q is None or getattr(above, "flipped", False):
             raise MotionFailure((pick, nodes[i + 1]), f"no IK solution above {place[0]}", node=place)
-        free(arm, up[-1], above.q, (pick, nodes[i + 1]), f"carrying {part.name} to {place[0]}",
-             f"carry {part.name} to {place[0]}")
-        keyframes.append({"name": f"{'preassembly' if final and not goal.on_table else 'above'}_{place[0]}",
-                          "arm": arm, "q": np.asarray(above.q).tolist()})
+        free(
+            arm,
+            up[-1],
+            above.q,
+            (pick, nodes[i + 1]),
+            f"carrying {part.name} to {place[0]}",
+            f"carry {part.name} to {place[0]}",
+        )
+        keyframes.append(
+            {
+                "name": f"{'preassembly' if final and not goal.on_table else 'above'}_{place[0]}",
+                "arm": arm,
+                "q": np.asarray(above.q).tolist(),
+            }
+        )
         # 5. final straight move: place on the table, or insert along v_a
         touch = goal.touch if final else ("table",)
         T_release = T_place_tcp.copy()
         if goal.on_table or not final:
             T_release[2, 3] += settings.release_gap
-        last = _line(robot, chk, arm, above.q, T_release, settings, (pick, nodes[i + 1]),
-                     f"{'insertion' if final and not goal.on_table else 'placing'} at {place[0]}", ignore=touch,
-                     node=place)
-        steps.append(Step(f"{'insert' if final and not goal.on_table else 'place'} {part.name} at {place[0]}",
-                          "path", arm, last))
+        last = _line(
+            robot,
+            chk,
+            arm,
+            above.q,
+            T_release,
+            settings,
+            (pick, nodes[i + 1]),
+            f"{'insertion' if final and not goal.on_table else 'placing'} at {place[0]}",
+            ignore=touch,
+            node=place,
+        )
+        steps.append(
+            Step(f"{'insert' if final and not goal.on_table else 'place'} {part.name} at {place[0]}", "path", arm, last)
+        )
         keyframes.append({"name": f"placed_{place[0]}", "arm": arm, "q": last[-1].tolist()})
         # 6. release and back off along the approach axis
         steps.append(Step(f"release {part.name}", "gripper", arm, event=GripperEvent(arm=arm, action="open")))
@@ -300,9 +358,17 @@ def realise_keyframes(
         # the opened fingers back off past the part they let go of, now an obstacle where it was placed
         extra = (Obstacle(part.name, part.mesh, T_part),)
         set_world(robot, world, *extra)
-        back = _line(robot, chk, arm, last[-1],
-                     approach_offset(robot.fk(arm, last[-1]), settings.pregrasp_distance), settings,
-                     (pick, nodes[i + 1]), f"retreat at {place[0]}", node=place)
+        back = _line(
+            robot,
+            chk,
+            arm,
+            last[-1],
+            approach_offset(robot.fk(arm, last[-1]), settings.pregrasp_distance),
+            settings,
+            (pick, nodes[i + 1]),
+            f"retreat at {place[0]}",
+            node=place,
+        )
         steps.append(Step("retreat", "path", arm, back))
         q_cur[arm] = back[-1]
         i = j + 1  # the edge after a hold is a transit (regrasp at that slot) or the end
@@ -342,8 +408,15 @@ def _free(
     its minimum clearance (metres) is appended to ``clearances``."""
     chk = _Checker(robot, arm)
     lo, hi = robot.joint_limits(arm)
-    res = planner.plan(np.asarray(q_a, float), np.asarray(q_b, float), lower=lo, upper=hi, is_valid=chk.valid,
-                       cost=chk.cost, time_limit=settings.motion_time_limit)
+    res = planner.plan(
+        np.asarray(q_a, float),
+        np.asarray(q_b, float),
+        lower=lo,
+        upper=hi,
+        is_valid=chk.valid,
+        cost=chk.cost,
+        time_limit=settings.motion_time_limit,
+    )
     if not res.success or res.path is None:
         # The goal configuration itself is in collision (a held part against the robot, say): no motion
         # to it can succeed, whatever edge leads there.

@@ -85,8 +85,9 @@ class PointArm(Robot):
     def set_obstacles(self, obstacles: Sequence[Obstacle]) -> None:
         self.obstacles = list(obstacles)
 
-    def attach(self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None, *,
-               width: float | None = None) -> None:
+    def attach(
+        self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None, *, width: float | None = None
+    ) -> None:
         pass
 
     def _hits(self, q: np.ndarray) -> list[tuple[str, str]]:

@@ -72,8 +72,17 @@ def _one_candidate(mesh: trimesh.Trimesh, p0, p1, x, hand: HandSpec, grid=(21, 3
     x = np.asarray(x, float)
     R = np.stack([x, y, np.cross(x, y)], axis=1)[None]
     strip = pad_strip(hand, *grid, inset=0.0, set_backs=False)
-    return pad_contacts(Raycaster(mesh), strip, np.array([p0], float), np.array([p1], float), R, np.zeros(1, int),
-                        compliance, compliance + 0.002, spacing=0.0005)
+    return pad_contacts(
+        Raycaster(mesh),
+        strip,
+        np.array([p0], float),
+        np.array([p1], float),
+        R,
+        np.zeros(1, int),
+        compliance,
+        compliance + 0.002,
+        spacing=0.0005,
+    )
 
 
 def test_soft_pad_on_sphere_touches_a_disc(hand) -> None:
@@ -117,8 +126,9 @@ def test_protrusion_under_the_pad_is_refused(hand) -> None:
     assert pc.protrusion[0, 0]
     shallow = trimesh.creation.box([0.004, 0.001, 0.04])  # 1 mm proud: within the compliance
     shallow.apply_translation([0.008, -0.0205, 0.0])
-    pc = _one_candidate(trimesh.boolean.union([base, shallow]), [0, -0.02, 0], [0, 0.02, 0], [1, 0, 0], hand,
-                        grid=(9, 13))
+    pc = _one_candidate(
+        trimesh.boolean.union([base, shallow]), [0, -0.02, 0], [0, 0.02, 0], [1, 0, 0], hand, grid=(9, 13)
+    )
     assert not pc.protrusion[0, 0]
 
 

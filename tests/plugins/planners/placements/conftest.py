@@ -72,8 +72,9 @@ def visible_cloud(
     return pts + rng.normal(0.0, noise, pts.shape)
 
 
-def table_cloud(center: np.ndarray, half: float, height: float, *, n: int = 3000, noise: float = 0.0005,
-                seed: int = 1) -> np.ndarray:
+def table_cloud(
+    center: np.ndarray, half: float, height: float, *, n: int = 3000, noise: float = 0.0005, seed: int = 1
+) -> np.ndarray:
     """Points of a horizontal table patch around ``center`` (x, y) at ``height``."""
     rng = np.random.default_rng(seed)
     xy = center[:2] + rng.uniform(-half, half, (n, 2))

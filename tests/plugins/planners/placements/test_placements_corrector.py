@@ -62,8 +62,11 @@ def test_snap_without_cloud_rests_exactly_and_keeps_yaw(l_block) -> None:
     for trial in range(10):
         placement = placements[trial % len(placements)]
         T_true = _true_pose(placement, rng)
-        T_rough = geometry.rot_z(np.radians(3.0)) @ geometry.from_rotvec(
-            rng.normal(size=3) / np.sqrt(3) * np.radians(6.0)) @ T_true
+        T_rough = (
+            geometry.rot_z(np.radians(3.0))
+            @ geometry.from_rotvec(rng.normal(size=3) / np.sqrt(3) * np.radians(6.0))
+            @ T_true
+        )
         T_rough[:3, 3] += rng.normal(0.0, 0.003, 3)
         c = corr.correct(T_rough, l_block, TablePlane(height=H))
         assert c.placement_id == placement.id
@@ -90,7 +93,8 @@ def test_planar_refinement_meets_the_targets(name: str, request: pytest.FixtureR
         order = len(placement.symmetry_yaws)
         assert _yaw_error_deg(c.T_world_part, T_true, order) <= 2.0
         com_err = geometry.transform_points(c.T_world_part, part.center_of_mass[None]) - geometry.transform_points(
-            T_true, part.center_of_mass[None])
+            T_true, part.center_of_mass[None]
+        )
         assert np.linalg.norm(com_err[0, :2]) <= 0.0015
         if order == 1:
             assert np.linalg.norm(c.T_world_part[:2, 3] - T_true[:2, 3]) <= 0.0015
@@ -133,7 +137,8 @@ def test_paper_mode_rpy_yaw_and_origin_pivot(l_block) -> None:
     T_true[:3, 3] += [0.0, 0.0, H]
     T_rough = geometry.from_rpy(0.05, -0.04, 0.0) @ T_true
     c = StablePlacementCorrector({"yaw_from": "rpy", "pivot": "origin", "refine": False}).correct(
-        T_rough, l_block, TablePlane(height=H))
+        T_rough, l_block, TablePlane(height=H)
+    )
     _check_resting(c, l_block, placement)
     assert np.allclose(c.T_world_part[:2, 3], T_rough[:2, 3], atol=1e-12)  # paper: p_c = (p_r.x, p_r.y, .)
 

@@ -19,8 +19,9 @@ def _normals(res: PlacementResult) -> np.ndarray:
 def _judge(mesh: trimesh.Trimesh, drops: int = 12, seed: int = 0) -> tuple[PlacementResult, object]:
     res = plan_placements(mesh)
     refused = np.array([r.normal for r in res.rejected]).reshape(-1, 3)
-    rep = drop_test(mesh, _normals(res), res.center_of_mass, refused_normals=refused, drops=drops, seed=seed,
-                    directions=4)
+    rep = drop_test(
+        mesh, _normals(res), res.center_of_mass, refused_normals=refused, drops=drops, seed=seed, directions=4
+    )
     return res, rep
 
 

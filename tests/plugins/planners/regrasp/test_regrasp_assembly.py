@@ -31,8 +31,12 @@ def random_scene(structure: str, seed: int) -> Iterator[tuple[Robot, AssemblyPro
     try:
         grasps = registry.create("grasp_planners", "antipodal", {}, seed=seed)
         T_a, T_b = random_start_poses([a, b], 0.0, SceneSettings(), np.random.default_rng([seed, 11]))
-        yield robot, AssemblyProblem(a, b, task, T_a, T_b, grasps.plan(a, robot.hand), grasps.plan(b, robot.hand),
-                                     TablePlane(height=0.0))
+        yield (
+            robot,
+            AssemblyProblem(
+                a, b, task, T_a, T_b, grasps.plan(a, robot.hand), grasps.plan(b, robot.hand), TablePlane(height=0.0)
+            ),
+        )
     finally:
         robot.close()
 
@@ -45,8 +49,9 @@ def peg():
 
 def test_goal_makes_the_insertion_vertical_and_keeps_b_above_the_table(peg) -> None:
     task, a, b = peg
-    goal = choose_assembly_goal(a, b, task, compute_placements(a), xy=(0.4, 0.0), yaw=0.3, table_height=0.1,
-                                retract=0.05)
+    goal = choose_assembly_goal(
+        a, b, task, compute_placements(a), xy=(0.4, 0.0), yaw=0.3, table_height=0.1, retract=0.05
+    )
     np.testing.assert_allclose(goal.v_world, [0.0, 0.0, -1.0], atol=1e-9)
     np.testing.assert_allclose(goal.T_world_b, goal.T_world_a @ task.T_A_B, atol=1e-12)
     # pre-assembly: 50 mm back along -v_a, i.e. straight up
@@ -62,16 +67,18 @@ def test_a_taught_insertion_a_degree_off_vertical_goes_straight_down(peg, tilt_d
     task, a, b = peg
     t = np.radians(tilt_deg)
     tilted = task.model_copy(update={"v_a": np.array([np.sin(t), 0.0, -np.cos(t)])})
-    goal = choose_assembly_goal(a, b, tilted, compute_placements(a), xy=(0.4, 0.0), yaw=0.3, table_height=0.1,
-                                retract=0.05)
+    goal = choose_assembly_goal(
+        a, b, tilted, compute_placements(a), xy=(0.4, 0.0), yaw=0.3, table_height=0.1, retract=0.05
+    )
     np.testing.assert_allclose(goal.T_world_b, goal.T_world_a @ task.T_A_B, atol=1e-12)
     np.testing.assert_allclose(goal.T_world_b_pre[:3, 3] - goal.T_world_b[:3, 3], -0.05 * goal.v_world, atol=1e-12)
     if snapped:
         np.testing.assert_array_equal(goal.v_world, [0.0, 0.0, -1.0])
     else:
         assert np.degrees(np.arccos(-goal.v_world[2])) == pytest.approx(tilt_deg, abs=1e-6)
-    off = choose_assembly_goal(a, b, tilted, compute_placements(a), xy=(0.4, 0.0), yaw=0.3, table_height=0.1,
-                               retract=0.05, vertical_snap=0.0)
+    off = choose_assembly_goal(
+        a, b, tilted, compute_placements(a), xy=(0.4, 0.0), yaw=0.3, table_height=0.1, retract=0.05, vertical_snap=0.0
+    )
     assert np.degrees(np.arccos(-off.v_world[2])) == pytest.approx(tilt_deg, abs=1e-6)
 
 
@@ -83,13 +90,17 @@ def test_a_slider_longer_than_the_retraction_is_retracted_clear_of_its_slot() ->
         box = Primitive(shape="box", size=size, pose={"xyz": [0, 0, size[2] / 2]})
         return PartSpec(name=name, solid=SolidSpec(add=[box], **kw))
 
-    block = spec("slot_block", [0.090, 0.060, 0.040],
-                 subtract=[Primitive(shape="box", size=[0.100, 0.021, 0.020], pose={"xyz": [0, 0, 0.035]})])
+    block = spec(
+        "slot_block",
+        [0.090, 0.060, 0.040],
+        subtract=[Primitive(shape="box", size=[0.100, 0.021, 0.020], pose={"xyz": [0, 0, 0.035]})],
+    )
     slider = spec("slider", [0.060, 0.020, 0.020])
     task = AssemblyTask(name="slide", part_a=block, part_b=slider, T_A_B={"xyz": [-0.015, 0, 0.025]}, v_a=[-1, 0, 0])
     a, b = build_part(block), build_part(slider)
-    goal = choose_assembly_goal(a, b, task, compute_placements(a), xy=(0.4, 0.0), yaw=0.0, table_height=0.0,
-                                retract=0.05)
+    goal = choose_assembly_goal(
+        a, b, task, compute_placements(a), xy=(0.4, 0.0), yaw=0.0, table_height=0.0, retract=0.05
+    )
     back = goal.T_world_b_pre[:3, 3] - goal.T_world_b[:3, 3]
     # along the insertion line, B's rear end (0.030 behind its origin at -0.015) passes A's end (+0.045)
     # by the 5 mm margin: 0.095 m back, whichever way A stands
@@ -121,9 +132,13 @@ def test_placement_slots_start_with_the_exact_start_and_goal_placements(peg) -> 
     start = lying[-1]
     assert start.id != lying[0].id
     T_goal = geometry.from_rpy(0.0, 0.0, 0.7) @ shank.T_table_part
-    slots = placement_slots(placements, (0.3, 0.2), 0.0, AssemblySettings(max_placements=2, placement_yaws=1),
-                            first=(geometry.from_rpy(0.0, 0.0, -1.1)[:3, :3] @ start.T_table_part[:3, :3],
-                                   T_goal[:3, :3]))
+    slots = placement_slots(
+        placements,
+        (0.3, 0.2),
+        0.0,
+        AssemblySettings(max_placements=2, placement_yaws=1),
+        first=(geometry.from_rpy(0.0, 0.0, -1.1)[:3, :3] @ start.T_table_part[:3, :3], T_goal[:3, :3]),
+    )
     assert [s.name for s in slots] == [f"placement{start.id}_yaw0", f"placement{shank.id}_yaw0"]
 
 
@@ -131,8 +146,9 @@ def test_placement_slots_every_keeps_symmetric_duplicates(peg) -> None:
     """The planner's second try: every placement, the four equal lying ones of the peg included."""
     _, _, b = peg
     placements = compute_placements(b)
-    slots = placement_slots(placements, (0.3, 0.2), 0.0, AssemblySettings(max_placements=1, placement_yaws=2),
-                            every=True)
+    slots = placement_slots(
+        placements, (0.3, 0.2), 0.0, AssemblySettings(max_placements=1, placement_yaws=2), every=True
+    )
     assert sorted({s.name.split("_yaw")[0] for s in slots}) == sorted(f"placement{p.id}" for p in placements)
     assert len(slots) == 2 * len(placements)
 
@@ -178,11 +194,20 @@ def test_plan_insertion_aims_b_at_an_a_seen_off_its_goal(peg_in_hole_plan) -> No
     """A seen 1 mm and 1 deg off its planned goal: B's segments alone, from where the arms are, into that A."""
     p = peg_in_hole_plan
     robot, task = p.robot, p.task
-    T_seen = geometry.compose(geometry.from_rpy(0, 0, 0, t=[0.001, 0.0, 0.0]), p.result.T_world_a_goal,
-                              geometry.rot_z(np.radians(1.0)))
+    T_seen = geometry.compose(
+        geometry.from_rpy(0, 0, 0, t=[0.001, 0.0, 0.0]), p.result.T_world_a_goal, geometry.rot_z(np.radians(1.0))
+    )
     grasps = registry.create("grasp_planners", "antipodal", {}, seed=0)
-    problem = AssemblyProblem(p.a, p.b, task, T_seen, p.T_b, grasps.plan(p.a, robot.hand),
-                              grasps.plan(p.b, robot.hand), TablePlane(height=0.0))
+    problem = AssemblyProblem(
+        p.a,
+        p.b,
+        task,
+        T_seen,
+        p.T_b,
+        grasps.plan(p.a, robot.hand),
+        grasps.plan(p.b, robot.hand),
+        TablePlane(height=0.0),
+    )
     planner = registry.create("assembly_planners", "regrasp", {}, seed=0)
     motion = registry.create("motion_planners", "rrtconnect", {}, seed=0)
     q_now = {arm: robot.current(arm) for arm in robot.arms}
@@ -247,13 +272,15 @@ def test_a_slider_whose_upright_goal_leaves_one_grasp_is_assembled_with_a_lying_
         chosen = upright._choose_goal(problem, robot, table_obstacle(robot, 0.0), None)[0]
         np.testing.assert_array_equal(chosen.v_world, [0.0, 0.0, -1.0])  # unchecked: the most vertical
         messages: list[str] = []
-        res = registry.create("assembly_planners", "regrasp", {}, seed=0).plan(problem, robot, motion,
-                                                                              progress=messages.append)
+        res = registry.create("assembly_planners", "regrasp", {}, seed=0).plan(
+            problem, robot, motion, progress=messages.append
+        )
         assert res.success, res.reason
         assert abs(res.details["v_world"][2]) < 1e-9  # sideways into a lying A
         assert res.details["goal_grasps_b"] >= 3
         assert any("goal placement" in m and "grasps of t_slider" in m for m in messages)
         np.testing.assert_allclose(res.T_world_b_goal, res.T_world_a_goal @ task.T_A_B, atol=1e-12)
+
 
 class _CountingPlanner:
     """A motion planner that counts its queries and passes them on."""
@@ -277,15 +304,21 @@ def test_keyframe_sequences_failing_at_a_straight_line_never_reach_the_motion_pl
     with random_scene("configs/parts/set1/notched_block.yaml", 0) as (robot, problem):
         motion = _CountingPlanner(registry.create("motion_planners", "trrt", {}, seed=0))
         messages: list[str] = []
-        res = registry.create("assembly_planners", "regrasp", {}, seed=0).plan(problem, robot, motion,
-                                                                              progress=messages.append)
+        res = registry.create("assembly_planners", "regrasp", {}, seed=0).plan(
+            problem, robot, motion, progress=messages.append
+        )
         assert res.success, res.reason
         # with the soft-pad grasp set (session 11) one of B's sequences meets A at its insertion (eight before)
         assert sum("insertion at assembled: collision" in m for m in messages) >= 1
         assert any("goal in collision" in m for m in messages)
-        free = [s for s in res.plan.segments if s.trajectory is not None
-                and (s.label.startswith(("move to pre-grasp", "carry")) or s.label.endswith("home"))]
+        free = [
+            s
+            for s in res.plan.segments
+            if s.trajectory is not None
+            and (s.label.startswith(("move to pre-grasp", "carry")) or s.label.endswith("home"))
+        ]
         assert motion.calls == len(free)
+
 
 @pytest.mark.slow
 def test_the_opened_hand_retreats_clear_of_the_part_it_let_go_of() -> None:
@@ -296,6 +329,7 @@ def test_the_opened_hand_retreats_clear_of_the_part_it_let_go_of() -> None:
         res = registry.create("assembly_planners", "regrasp", {}, seed=36).plan(problem, robot, motion)
         assert res.success, res.reason
         a, b = problem.part_a, problem.part_b
-        chk = robot.verify_plan(res.plan, {a.name: (a, problem.T_world_a), b.name: (b, problem.T_world_b)},
-                                problem.table, resolution=0.005)
+        chk = robot.verify_plan(
+            res.plan, {a.name: (a, problem.T_world_a), b.name: (b, problem.T_world_b)}, problem.table, resolution=0.005
+        )
         assert chk.ok, chk.summary()

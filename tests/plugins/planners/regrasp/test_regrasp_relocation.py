@@ -29,8 +29,14 @@ from asmteach.plugins.planners.regrasp.realise import PlaceGoal
 from asmteach.plugins.planners.regrasp.settings import AssemblySettings
 from asmteach.plugins.planners.regrasp.slots import placement_slots, relocated_slots
 
-HAND = HandSpec(name="test_2f", max_width=0.085, finger_size=[0.010, 0.020, 0.045], pad_size=(0.020, 0.030),
-                palm_center=[0.0, 0.0, -0.050], palm_size=[0.040, 0.100, 0.040])
+HAND = HandSpec(
+    name="test_2f",
+    max_width=0.085,
+    finger_size=[0.010, 0.020, 0.045],
+    pad_size=(0.020, 0.030),
+    palm_center=[0.0, 0.0, -0.050],
+    palm_size=[0.040, 0.100, 0.040],
+)
 START_XY = np.array([0.30, 0.30])
 GOAL_XY = np.array([0.40, 0.0])
 
@@ -67,8 +73,9 @@ class EdgeOfReachArm(Robot):
     def set_obstacles(self, obstacles: Sequence[Obstacle]) -> None:
         pass
 
-    def attach(self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None, *,
-               width: float | None = None) -> None:
+    def attach(
+        self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None, *, width: float | None = None
+    ) -> None:
         pass
 
     def set_configuration(self, arm: str, q: np.ndarray) -> None:
@@ -95,8 +102,9 @@ def grasp(gid: int, approach: Sequence[float], z: float) -> Grasp:
     """Across the peg's y (20 mm) at height ``z`` of its axis, the TCP approaching along ``approach`` (part)."""
     zt = np.asarray(approach, float) / np.linalg.norm(approach)
     yt = np.array([0.0, 1.0, 0.0])
-    return Grasp(id=gid, p0=[0.0, -0.01, z], p1=[0.0, 0.01, z], R=np.column_stack([np.cross(yt, zt), yt, zt]),
-                 width=0.02)
+    return Grasp(
+        id=gid, p0=[0.0, -0.01, z], p1=[0.0, 0.01, z], R=np.column_stack([np.cross(yt, zt), yt, zt]), width=0.02
+    )
 
 
 @pytest.fixture(scope="module")
@@ -105,16 +113,19 @@ def peg() -> PartModel:
     return build_part(PartSpec(name="peg", solid=SolidSpec(add=[box])))
 
 
-GRASPS = [grasp(0, [1, 0, 0], 0.04),  # across the side: from above while the peg lies on its -x face
-          grasp(1, [0, 0, -1], 0.07),  # on the top end: from above while the peg stands
-          grasp(2, [1, 0, -1], 0.06)]  # diagonal: 45 deg from vertical lying and standing
+GRASPS = [
+    grasp(0, [1, 0, 0], 0.04),  # across the side: from above while the peg lies on its -x face
+    grasp(1, [0, 0, -1], 0.07),  # on the top end: from above while the peg stands
+    grasp(2, [1, 0, -1], 0.06),
+]  # diagonal: 45 deg from vertical lying and standing
 
 
 LYING = Rotation.from_euler("y", 90, degrees=True).as_matrix()  # on its -x face, the axis along world +x
 
 
-def transfer(peg: PartModel, settings: AssemblySettings, world: Sequence[Obstacle] = (),
-             T_goal: np.ndarray | None = None):
+def transfer(
+    peg: PartModel, settings: AssemblySettings, world: Sequence[Obstacle] = (), T_goal: np.ndarray | None = None
+):
     T_start = geometry.from_rotation(LYING, [*START_XY, 0.01])
     T_goal = geometry.from_rotation(np.eye(3), [*GOAL_XY, 0.0]) if T_goal is None else T_goal
     calls: list[bool] = []
@@ -124,10 +135,18 @@ def transfer(peg: PartModel, settings: AssemblySettings, world: Sequence[Obstacl
         return placement_slots(compute_placements(peg), T_start[:2, 3], 0.0, settings, every=every)
 
     robot = EdgeOfReachArm()
-    res = plan_transfer(robot, StraightLine(), peg, GRASPS, T_start=T_start,
-                        goal=PlaceGoal(PoseSlot("goal", "goal", T_goal), np.array([0.0, 0.0, 0.05]), on_table=False),
-                        middle_slots=middle, world=list(world), q_now={"left": robot.home("left")},
-                        settings=settings)
+    res = plan_transfer(
+        robot,
+        StraightLine(),
+        peg,
+        GRASPS,
+        T_start=T_start,
+        goal=PlaceGoal(PoseSlot("goal", "goal", T_goal), np.array([0.0, 0.0, 0.05]), on_table=False),
+        middle_slots=middle,
+        world=list(world),
+        q_now={"left": robot.home("left")},
+        settings=settings,
+    )
     return res, calls
 
 
@@ -146,8 +165,9 @@ def test_a_peg_is_stood_up_further_toward_the_goal_when_no_placement_at_its_star
 
 def test_a_peg_that_needs_no_regrasp_is_carried_straight_there(peg) -> None:
     """The cheap search comes first: no placement is evaluated, let alone moved."""
-    res, calls = transfer(peg, AssemblySettings(placement_yaws=2),
-                          T_goal=geometry.from_rotation(LYING, [*GOAL_XY, 0.01]))
+    res, calls = transfer(
+        peg, AssemblySettings(placement_yaws=2), T_goal=geometry.from_rotation(LYING, [*GOAL_XY, 0.01])
+    )
     assert res.success, res.reason
     assert calls == [] and "relocations" not in res.stats
     assert [n[0] for n in res.search.nodes] == ["start", "goal"]
@@ -161,8 +181,9 @@ def test_without_relocations_the_peg_cannot_be_turned(peg) -> None:
 
 def test_a_position_too_near_an_obstacle_is_skipped_for_the_next(peg) -> None:
     """A box on the half-way point: the placements go three quarters of the way instead (0.375, 0.075)."""
-    box = Obstacle("box", trimesh.creation.box(extents=[0.02, 0.02, 0.02]),
-                   geometry.from_rotation(np.eye(3), [0.35, 0.15, 0.01]))
+    box = Obstacle(
+        "box", trimesh.creation.box(extents=[0.02, 0.02, 0.02]), geometry.from_rotation(np.eye(3), [0.35, 0.15, 0.01])
+    )
     settings = AssemblySettings(placement_yaws=2, relocations=(0.5, 0.75), relocation_clearance=0.01)
     res, _ = transfer(peg, settings, world=[box])
     assert res.success, res.reason
@@ -172,8 +193,14 @@ def test_a_position_too_near_an_obstacle_is_skipped_for_the_next(peg) -> None:
 
 def test_relocated_slots_move_every_slot_or_none(peg) -> None:
     slots = placement_slots(compute_placements(peg), START_XY, 0.0, AssemblySettings(placement_yaws=2))
-    far = MeshCollider({"box": (trimesh.creation.box(extents=[0.04, 0.04, 0.04]),
-                                geometry.from_rotation(np.eye(3), [0.35, 0.40, 0.02]))})
+    far = MeshCollider(
+        {
+            "box": (
+                trimesh.creation.box(extents=[0.04, 0.04, 0.04]),
+                geometry.from_rotation(np.eye(3), [0.35, 0.40, 0.02]),
+            )
+        }
+    )
     moved = relocated_slots(slots, START_XY, (0.35, 0.15), peg, far, clearance=0.03)
     assert [s.name for s in moved] == [f"{s.name}_at350_150" for s in slots]
     for s, m in zip(slots, moved, strict=True):
@@ -196,11 +223,22 @@ def test_re_searches_are_counted_and_wall_clock_cuts_reported(peg) -> None:
     every motion a wall-clock limit cut is listed: the plan then depends on the load, and says so."""
     T_start = geometry.from_rotation(LYING, [*START_XY, 0.01])
     robot = EdgeOfReachArm()
-    res = plan_transfer(robot, TimesOut(), peg, GRASPS, T_start=T_start,
-                        goal=PlaceGoal(PoseSlot("goal", "goal", geometry.from_rotation(LYING, [*GOAL_XY, 0.01])),
-                                       np.array([0.0, 0.0, 0.05]), on_table=False),
-                        middle_slots=lambda every: [], world=[], q_now={"left": robot.home("left")},
-                        settings=AssemblySettings(placement_yaws=2, max_attempts=1))
+    res = plan_transfer(
+        robot,
+        TimesOut(),
+        peg,
+        GRASPS,
+        T_start=T_start,
+        goal=PlaceGoal(
+            PoseSlot("goal", "goal", geometry.from_rotation(LYING, [*GOAL_XY, 0.01])),
+            np.array([0.0, 0.0, 0.05]),
+            on_table=False,
+        ),
+        middle_slots=lambda every: [],
+        world=[],
+        q_now={"left": robot.home("left")},
+        settings=AssemblySettings(placement_yaws=2, max_attempts=1),
+    )
     assert not res.success
     assert "1 keyframe sequences tried (max_attempts)" in (res.reason or "")
     assert res.stats["wall_clock_cuts"] == ["motion to the pre-grasp at start: timeout after 5.0 s"]

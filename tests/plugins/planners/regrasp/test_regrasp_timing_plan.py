@@ -11,19 +11,47 @@ from asmteach.plugins.planners.regrasp.plan_io import robot_seconds, segment_kin
 from asmteach.plugins.planners.regrasp.realise import Step
 
 LABELS = [
-    "move to pre-grasp 3 of peg at start", "approach grasp 3", "close on peg", "lift peg",
-    "carry peg to placement2_yaw90", "place peg at placement2_yaw90", "release peg", "retreat", "left arm home",
-    "move to pre-grasp 7 of peg at placement2_yaw90", "approach grasp 7", "close on peg", "lift peg",
-    "carry peg to assembled", "insert peg at assembled", "release peg", "retreat", "right arm home",
+    "move to pre-grasp 3 of peg at start",
+    "approach grasp 3",
+    "close on peg",
+    "lift peg",
+    "carry peg to placement2_yaw90",
+    "place peg at placement2_yaw90",
+    "release peg",
+    "retreat",
+    "left arm home",
+    "move to pre-grasp 7 of peg at placement2_yaw90",
+    "approach grasp 7",
+    "close on peg",
+    "lift peg",
+    "carry peg to assembled",
+    "insert peg at assembled",
+    "release peg",
+    "retreat",
+    "right arm home",
 ]
 
 
 def test_segment_kinds_split_a_plan_with_one_regrasp() -> None:
     assert segment_kinds(LABELS) == [
-        "transit", "approach", "gripper", "approach",
-        "transit", "regrasp", "regrasp", "regrasp", "regrasp",
-        "regrasp", "regrasp", "regrasp", "regrasp",
-        "transit", "insertion", "gripper", "approach", "transit",
+        "transit",
+        "approach",
+        "gripper",
+        "approach",
+        "transit",
+        "regrasp",
+        "regrasp",
+        "regrasp",
+        "regrasp",
+        "regrasp",
+        "regrasp",
+        "regrasp",
+        "regrasp",
+        "transit",
+        "insertion",
+        "gripper",
+        "approach",
+        "transit",
     ]
     # A placed at its goal is no regrasp; a relocated middle placement is
     assert segment_kinds(["place block at goal", "retreat"]) == ["approach", "approach"]
