@@ -24,6 +24,7 @@ import numpy as np
 
 from asmteach.core import geometry, registry
 from asmteach.core.config import ROLE_OF_KEY, ExecutionSettings, RunConfig, validate_settings
+from asmteach.core.detect_correct import detect_and_correct
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import AssemblyProblem, PartModel, Robot
 from asmteach.core.io import describe_os_error, to_jsonable, write_json, write_model
@@ -215,15 +216,13 @@ def _detect(run: _Run, robot: Robot, parts: tuple[PartModel, ...], table: TableP
         out: dict[str, Detection] = {}
         for part in parts:
             detector.prepare(part)
-            det = detector.detect(cloud, part, table, viewpoint=viewpoint)
+            det = detect_and_correct(detector, corrector, cloud, part, table, viewpoint=viewpoint)
             if not det.found or det.rough is None:
                 run.report.detections.append(det)
                 raise StageFailed(f"{part.name} not found: {det.reason}")
-            if corrector is not None:
-                segment = _segment_near(cloud, part, det.rough)
-                corr = corrector.correct(det.rough, part, table, segment, viewpoint=viewpoint)
-                det.corrected = corr.T_world_part
-                det.details["placement_id"] = corr.placement_id
+            if "correction_error" in det.details:
+                run.report.detections.append(det)
+                raise StageFailed(f"{part.name} found but not corrected: {det.details['correction_error']}")
             T_true = truth[part.name]
             det.details["T_world_part_true"] = T_true.tolist()
             for key in ("rough", "corrected"):
@@ -260,17 +259,6 @@ def _sense(robot: Robot, frames: int = 1) -> tuple[np.ndarray, np.ndarray, np.nd
     except NotImplementedError:
         viewpoint = None
     return depth, cloud, viewpoint
-
-
-def _segment_near(cloud: np.ndarray, part: PartModel, T: np.ndarray, radius: float = 0.01) -> np.ndarray:
-    """Cloud points within ``radius`` metres of the part's surface at ``T`` (its observed segment)."""
-    from scipy.spatial import cKDTree
-
-    pts = cloud[np.all(np.isfinite(cloud), axis=1)]
-    # Seeded: unseeded, the segment (so the corrected pose and the whole plan) changed from run to run.
-    surface = geometry.transform_points(T, np.asarray(part.mesh.sample(3000, return_index=False, seed=0), float))
-    d, _ = cKDTree(surface).query(pts, distance_upper_bound=radius)
-    return pts[np.isfinite(d)]
 
 
 def _grasps(run: _Run, robot: Robot, a: PartModel, b: PartModel) -> dict[str, list]:
@@ -340,16 +328,16 @@ def _look_again(run: _Run, robot: Robot, task: AssemblyTask, parts: tuple[PartMo
     with run.stage("look_again") as d:
         detector = run.plugin("detector")
         _, cloud, viewpoint = _sense(robot, ex.depth_frames)
-        det = detector.detect(cloud, a, table, viewpoint=viewpoint)
+        corrector = run.plugin("corrector") if run.cfg.corrector is not None else None
+        det = detect_and_correct(detector, corrector, cloud, a, table, viewpoint=viewpoint)
         if not det.found or det.rough is None:
             if detections[a.name].details.get("ambiguous"):
                 raise StageFailed(f"{a.name} not found again at its goal: {det.reason}")
             d["not_found"] = det.reason  # nothing to decide: the plan goes on as it was
             return result, rest
-        T = det.rough
-        if run.cfg.corrector is not None:
-            corrector = run.plugin("corrector")
-            T = corrector.correct(T, a, table, _segment_near(cloud, a, T), viewpoint=viewpoint).T_world_part
+        T = det.best
+        if "correction_error" in det.details:
+            d["correction_error"] = det.details["correction_error"]  # the rough pose is all there is
         T_near = nearest_symmetric(T, result.T_world_a_goal, run.symmetries(a))  # the same solid, nearest the goal
         err = pose_error(T_near, result.T_world_a_goal)
         d["a_vs_goal"] = err.short(3)
