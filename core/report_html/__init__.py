@@ -24,7 +24,7 @@ true pose, the robot's clock), :mod:`.page` (the HTML page) and
 from __future__ import annotations
 
 from asmteach.core.report_html.console import format_summary
-from asmteach.core.report_html.facts import TRUE_POSE_KEYS, pose_errors
+from asmteach.core.report_html.facts import TRUE_POSE_KEYS
 from asmteach.core.report_html.page import IMAGE_TYPES, render_report_html, write_report_html
 
-__all__ = ["IMAGE_TYPES", "TRUE_POSE_KEYS", "format_summary", "pose_errors", "render_report_html", "write_report_html"]
+__all__ = ["IMAGE_TYPES", "TRUE_POSE_KEYS", "format_summary", "render_report_html", "write_report_html"]

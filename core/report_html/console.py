@@ -60,7 +60,7 @@ def format_summary(report: RunReport) -> str:
             err = ""
             if T_true is not None:
                 e = recorded_errors(det, "corrected" if det.corrected is not None else "rough", T, T_true)
-                err = f"  error {e['pos_mm']:.2f} mm / {e['rot_deg']:.2f} deg"
+                err = f"  error {e['position_mm']:.2f} mm / {e['angle_deg']:.2f} deg"
             lines.append(f"  {det.part}: [{xyz}] mm{err}")
     if report.metrics:
         lines.append("metrics:")

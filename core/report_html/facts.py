@@ -12,6 +12,7 @@ import numpy as np
 
 from asmteach.core import geometry
 from asmteach.core.models import Detection, RunReport
+from asmteach.core.pose_error import pose_error
 
 TRUE_POSE_KEYS: tuple[str, ...] = ("T_world_part_true", "T_world_true", "T_true")
 """Keys of ``Detection.details`` read as the true ``T_world_part`` (4x4, metres), first found wins."""
@@ -59,27 +60,13 @@ def true_pose(det: Detection) -> np.ndarray | None:
 
 
 def recorded_errors(det: Any, label: str, T: np.ndarray, T_true: np.ndarray) -> dict[str, Any]:
-    """:func:`pose_errors`, with distance and angle as the run recorded them (modulo the part's symmetries)."""
-    err = pose_errors(T, T_true)
+    """:func:`~asmteach.core.pose_error.pose_error` of ``T`` against ``T_true`` as a dict, with distance and
+    angle as the run recorded them (modulo the part's symmetries)."""
+    err = pose_error(T, T_true).as_dict()
     rec = det.details.get(f"{label}_error") or {}
-    err["pos_mm"] = rec.get("position_mm", err["pos_mm"])
-    err["rot_deg"] = rec.get("angle_deg", err["rot_deg"])
+    err["position_mm"] = rec.get("position_mm", err["position_mm"])
+    err["angle_deg"] = rec.get("angle_deg", err["angle_deg"])
     return err
-
-
-def pose_errors(T_est: np.ndarray, T_true: np.ndarray) -> dict[str, Any]:
-    """Errors of an estimated pose against the true one (both ``T_world_part``, metres).
-
-    Returns ``pos_mm`` (distance of the origins), ``dxyz_mm`` (estimate minus
-    truth, world axes, ``(3,)``) and ``rot_deg`` (geodesic angle of
-    ``R_est^T R_true``).
-    """
-    d = (np.asarray(T_est, float)[:3, 3] - np.asarray(T_true, float)[:3, 3]) * 1000.0
-    return {
-        "pos_mm": float(np.linalg.norm(d)),
-        "dxyz_mm": d.tolist(),
-        "rot_deg": math.degrees(geometry.rotation_distance(T_est, T_true)),
-    }
 
 
 ROBOT_KINDS = ("transit", "approach", "insertion", "regrasp")

@@ -213,8 +213,8 @@ def _detections_section(report: RunReport) -> str:
             err_pos = err_rot = ""
             if T_true is not None:
                 err = recorded_errors(det, label, T, T_true)
-                err_pos = f"{err['pos_mm']:.2f} ({vector_text(err['dxyz_mm'])})"
-                err_rot = f"{err['rot_deg']:.2f}"
+                err_pos = f"{err['position_mm']:.2f} ({vector_text(err['dxyz_mm'])})"
+                err_rot = f"{err['angle_deg']:.2f}"
             note = []
             if label == "rough" and det.fitness is not None:
                 note.append(f"fitness {det.fitness:.3f}")

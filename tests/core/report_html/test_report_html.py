@@ -19,7 +19,7 @@ from asmteach.core.models import (
     StageOutcome,
     TeachingEvidence,
 )
-from asmteach.core.report_html import format_summary, pose_errors, write_report_html
+from asmteach.core.report_html import format_summary, write_report_html
 
 VOID = {"meta", "img", "br", "hr", "link", "input"}
 
@@ -153,14 +153,6 @@ def test_report_without_task_detections_or_figures_still_renders(tmp_path):
     parser = Checker()
     parser.feed(text)
     assert parser.errors == [] and "SUCCESS" in text and "no task was taught" in text and "no figures" in text
-
-
-def test_pose_errors():
-    T = geometry.from_xyz_rpy([0.1, 0.2, 0.3], [0.1, 0.2, 0.3])
-    moved = geometry.compose(geometry.from_xyz_rpy([0.003, -0.004, 0], [0, 0, 0]), T, geometry.from_rpy(0.05, 0, 0))
-    err = pose_errors(moved, T)
-    assert err["pos_mm"] == pytest.approx(5.0) and np.allclose(err["dxyz_mm"], [3.0, -4.0, 0.0])
-    assert err["rot_deg"] == pytest.approx(math.degrees(0.05))
 
 
 def test_format_summary_fits_one_screen(tmp_path):
