@@ -33,6 +33,7 @@ __all__ = [
     "TableSettings",
     "check_finite",
     "check_overrides",
+    "check_plugin_settings",
     "format_validation_error",
     "load_run_config",
     "validate_demo",
@@ -299,6 +300,21 @@ def validate_settings(cls: type[Plugin], settings: dict[str, Any], *, where: str
         return cls.Settings.model_validate(settings)
     except ValidationError as exc:
         raise UserError(format_validation_error(exc, where)) from None
+
+
+def check_plugin_settings(role: str, name: str, settings: dict[str, Any], *, name_key: str, settings_key: str) -> None:
+    """Plugin ``name`` of ``role`` exists and ``settings`` pass its model; :class:`UserError` naming the key.
+
+    For settings an experiment's params carry for a plugin it builds per trial (checked up front, in
+    ``Experiment.check``, like a run config's).
+    """
+    from asmteach.core import registry
+
+    try:
+        cls = registry.get_class(role, name)
+    except UserError as exc:
+        raise UserError(f"{name_key}: {exc}") from None
+    validate_settings(cls, settings, where=settings_key)
 
 
 def validate_demo(teacher: type[Plugin], name: str, demo: dict[str, Any]) -> BaseModel | None:

@@ -170,6 +170,14 @@ EXPERIMENT_TYPOS = [
      "params.demo.framez: unknown key"),
     (f"experiment: teaching_breakdown\nparams: {{structure: {PEG}, teacher: {{min_frame: 3}}}}\n",
      "params.teacher.min_frame: unknown key"),
+    (f"experiment: detection_precision\nparams: {{parts: [{{structure: {PEG}, placements: [0]}}], "
+     "detector_settings: {refine: {icp_iteration: 3}}}\n", "params.detector_settings.refine.icp_iteration: unknown"),
+    ("experiment: detection_precision\nparams: {parts: [{structure: x.yaml, placements: [0]}], corrector: stable}\n",
+     "params.corrector: no corrector plugin named 'stable'"),
+    ("experiment: grasp_hold\nparams: {part: round_peg, planner: {samples: 10, muu: 0.5}}\n",
+     "params.planner.muu: unknown key"),
+    ("experiment: reachability\nparams: {robot_settings: {table_hieght: 0.1}}\n",
+     "params.robot_settings.table_hieght: unknown key"),
 ]  # fmt: skip
 
 

@@ -33,7 +33,7 @@ import numpy as np
 from pydantic import Field
 
 from asmteach.core import geometry, registry
-from asmteach.core.config import TableSettings
+from asmteach.core.config import TableSettings, check_plugin_settings
 from asmteach.core.detect_correct import detect_and_correct
 from asmteach.core.interfaces import Corrector, Detector, PartModel
 from asmteach.core.io import write_text
@@ -137,6 +137,14 @@ class DetectionPrecision(Experiment):
     """Rough and corrected detection errors on synthetic Kinect scenes (see the module docstring)."""
 
     Params = DetectionParams
+
+    def check(self, params: DetectionParams) -> None:
+        """The detector's and corrector's settings by their plugins' models, before any trial."""
+        check_plugin_settings("detectors", params.detector, params.detector_settings, name_key="params.detector",
+                              settings_key="params.detector_settings")
+        if params.corrector is not None:
+            check_plugin_settings("correctors", params.corrector, params.corrector_settings,
+                                  name_key="params.corrector", settings_key="params.corrector_settings")
 
     def _pairs(self, params: DetectionParams) -> list[tuple[str, str, int]]:
         return [(str(self.path(pc.structure)), pc.part, pid) for pc in params.parts for pid in pc.placements]

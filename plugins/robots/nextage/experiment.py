@@ -27,6 +27,7 @@ from pydantic import Field
 
 from asmteach.core import registry
 from asmteach.core.arm.kinematics import rotation_error
+from asmteach.core.config import check_plugin_settings
 from asmteach.core.io import atomic_path, write_text
 from asmteach.core.models import StrictModel
 from asmteach.core.sweep import Experiment
@@ -68,6 +69,11 @@ class Reachability(Experiment):
     """IK reachability map of one arm for one grasp kind."""
 
     Params = ReachabilityParams
+
+    def check(self, params: ReachabilityParams) -> None:
+        """The robot plugin and its settings, before any trial."""
+        check_plugin_settings("robots", params.robot, params.robot_settings, name_key="params.robot",
+                              settings_key="params.robot_settings")
 
     def run_trial(self, params: ReachabilityParams, seed: int, workdir: Path) -> dict[str, Any]:
         robot = registry.create("robots", params.robot, params.robot_settings, seed=seed)
