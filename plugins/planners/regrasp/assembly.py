@@ -26,7 +26,8 @@ other obstacles; the part is then carried there, regrasped, and carried on.
 
 This module searches and re-searches; the settings are in :mod:`.settings`,
 the middle-layer slots in :mod:`.slots`, and turning a keyframe path into
-joint paths (where a motion fails and which edge to ban) in :mod:`.realise`.
+joint paths in :mod:`.realise`, with the single motions (and which edge a
+failed one bans) in :mod:`.motions`.
 
 Frames: ``T_world_*`` 4x4 in metres; joint paths in radians.
 """
@@ -58,7 +59,8 @@ from asmteach.plugins.planners.regrasp.graph import (
     build_regrasp_graph,
     search_keyframes,
 )
-from asmteach.plugins.planners.regrasp.realise import MotionFailure, PlaceGoal, Step, realise_keyframes, reset_world
+from asmteach.plugins.planners.regrasp.motions import MotionFailure, reset_world
+from asmteach.plugins.planners.regrasp.realise import PlaceGoal, Step, realise_keyframes
 from asmteach.plugins.planners.regrasp.settings import AssemblySettings
 from asmteach.plugins.planners.regrasp.slots import relocated_slots
 
@@ -258,10 +260,18 @@ def plan_transfer(
         stats["graph_edges"] = G.number_of_edges()
         if not search.success:
             reason = search.reason or "no keyframe path"
+            if search.cut in ("start", "goal"):
+                reason += f": {layers[0 if search.cut == 'start' else 1].summary()}"
             if last_reason is not None:
                 reason += f"; last motion failure: {last_reason}"
+            stats.update(cut=search.cut, components=search.components)
             return TransferResult(
-                False, search=search, graph=G, reason=reason, stats=_rounded(stats), keyframes=_why_layers(layers)
+                False,
+                search=search,
+                graph=G,
+                reason=f"{reason}; {_time_spent(stats, t0)}",
+                stats=_rounded(stats),
+                keyframes=[f.counts() for f in layers],
             )
         attempts += 1
         tm = time.perf_counter()
@@ -285,7 +295,8 @@ def plan_transfer(
                     search=search,
                     graph=G,
                     stats=_rounded(stats),
-                    reason=f"{attempts} keyframe sequences tried (max_attempts); last failure: {last_reason}",
+                    reason=f"{attempts} keyframe sequences tried (max_attempts); last failure: {last_reason}; "
+                    f"{_time_spent(stats, t0)}",
                 )
             if time.perf_counter() - t0 > settings.time_budget:
                 stats["wall_clock_cuts"].append(f"time budget of {settings.time_budget:.0f} s")
@@ -295,7 +306,7 @@ def plan_transfer(
                     graph=G,
                     stats=_rounded(stats),
                     reason=f"time budget of {settings.time_budget:.0f} s (wall clock) spent after {attempts} "
-                    f"keyframe sequences; last failure: {last_reason}",
+                    f"keyframe sequences; last failure: {last_reason}; {_time_spent(stats, t0)}",
                 )
             continue
         stats["motion_seconds"] += time.perf_counter() - tm
@@ -316,14 +327,9 @@ def _rounded(stats: dict[str, Any]) -> dict[str, Any]:
     return {k: round(v, 4) if isinstance(v, float) else v for k, v in stats.items()}
 
 
-def _why_layers(layers: Sequence[GraspFeasibility]) -> list[dict[str, Any]]:
-    """Per slot: feasible count and the most common rejection reasons (for failure reports)."""
-    out = []
-    for f in layers:
-        counts: dict[str, int] = {}
-        for r in f.rejected.values():
-            key = r.split("(")[0].strip()
-            counts[key] = counts.get(key, 0) + 1
-        top = sorted(counts.items(), key=lambda kv: -kv[1])[:4]
-        out.append({"slot": f.slot.name, "feasible": len(f.solutions), "rejected": dict(top)})
-    return out
+def _time_spent(stats: dict[str, Any], t0: float) -> str:
+    """Where the part's planning time went (seconds, wall clock): building the graph, searching it, motions."""
+    return (
+        f"{time.perf_counter() - t0:.1f} s spent: {stats['graph_seconds']:.1f} s on the grasp layers, "
+        f"{stats['search_seconds']:.1f} s searching, {stats['motion_seconds']:.1f} s on motions"
+    )

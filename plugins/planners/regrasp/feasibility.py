@@ -30,7 +30,7 @@ from asmteach.core.geometry import compose, from_rotation
 from asmteach.core.hand_geometry import MeshCollider, hand_boxes
 from asmteach.core.interfaces import Obstacle, Robot
 from asmteach.core.models import Grasp, HandSpec
-from asmteach.plugins.planners.regrasp.graph import GraspFeasibility, PoseSlot
+from asmteach.plugins.planners.regrasp.graph import GraspFeasibility, PoseSlot, Rejected, Rejection
 
 __all__ = [
     "FLIP_Z",
@@ -91,19 +91,19 @@ def screen_slot(
     hand: HandSpec,
     settings: ScreenSettings,
     on_table: bool = True,
-) -> tuple[list[Grasp], dict[int, str]]:
+) -> tuple[list[Grasp], dict[int, Rejection]]:
     """Grasps passing the cheap tests at ``slot``, and why the others fail (keyed by grasp id)."""
     passed: list[Grasp] = []
-    rejected: dict[int, str] = {}
+    rejected: dict[int, Rejection] = {}
     for g in grasps:
         T = slot.T_world_part @ g.T_part_tcp
         if on_table and -T[2, 2] < settings.min_down:
-            rejected[g.id] = "screen: approach not from above"
+            rejected[g.id] = Rejection(Rejected.NOT_FROM_ABOVE)
             continue
         opening = min(g.width + 2.0 * settings.finger_clearance, hand.max_width)
         hit = collider.first_contact(hand_boxes(hand, opening, sweep=settings.pregrasp_distance), T)
         if hit is not None:
-            rejected[g.id] = f"collision: hand/{hit[0]} with {hit[1]}"
+            rejected[g.id] = Rejection(Rejected.HAND_COLLISION, f"hand/{hit[0]} with {hit[1]}", hit[1] == "table")
             continue
         passed.append(g)
     return passed, rejected
@@ -163,9 +163,11 @@ def evaluate_slots(
     for k, (slot, (passed, screened_out)) in enumerate(zip(slots, screened, strict=True)):
         counts = shared[k] if shared is not None else {}
         order = sorted(passed, key=lambda g: (g.id not in first, -counts.get(g.id, 0), -g.score))
-        rejected: dict[tuple[int, str], str] = {(variant_id(gid, False), ""): r for gid, r in screened_out.items()}
+        rejected: dict[tuple[int, str], Rejection] = {
+            (variant_id(gid, False), ""): r for gid, r in screened_out.items()
+        }
         for g in order[settings.max_candidates :]:
-            rejected[(variant_id(g.id, False), "")] = "screen: beyond the candidate cap"
+            rejected[(variant_id(g.id, False), "")] = Rejection(Rejected.CANDIDATE_CAP)
         out.append(GraspFeasibility(slot=slot, solutions={}, rejected=rejected))
         jobs += [(k, g) for g in order[: settings.max_candidates]]
     if not jobs:
@@ -180,8 +182,8 @@ def evaluate_slots(
             if r.success and r.q is not None:
                 good.append(i)
             else:
-                out[jobs[i][0]].rejected[keys[i]] = f"ik: {r.reason or 'no solution'}"
-        good = _collision_free(robot, arm, good, [res[i].q for i in good], out, jobs, keys, "")
+                out[jobs[i][0]].rejected[keys[i]] = Rejection(Rejected.NO_IK, r.reason or "")
+        good = _collision_free(robot, arm, good, [res[i].q for i in good], out, jobs, keys, pregrasp=False)
         if not good:
             continue
         T_eff = np.stack([T_tcp[i] @ FLIP_Z if res[i].flipped else T_tcp[i] for i in good])
@@ -190,11 +192,11 @@ def evaluate_slots(
         reach = []
         for i, p in zip(good, pre, strict=True):
             if not p.success or p.q is None or p.flipped:
-                out[jobs[i][0]].rejected[keys[i]] = "ik: pre-grasp pose unreachable"
+                out[jobs[i][0]].rejected[keys[i]] = Rejection(Rejected.PREGRASP_NO_IK)
             else:
                 reach.append((i, p.q))
         clear = _collision_free(
-            robot, arm, [i for i, _ in reach], [q for _, q in reach], out, jobs, keys, "at the pre-grasp pose"
+            robot, arm, [i for i, _ in reach], [q for _, q in reach], out, jobs, keys, pregrasp=True
         )
         for i in clear:
             out[jobs[i][0]].solutions[keys[i]] = np.asarray(res[i].q, float)
@@ -209,18 +211,26 @@ def _collision_free(
     out: list[GraspFeasibility],
     jobs: list[tuple[int, Grasp]],
     keys: list[tuple[int, str]],
-    where: str,
+    pregrasp: bool,
 ) -> list[int]:
-    """The entries of ``idx`` whose configuration is free; the others get a collision reason."""
+    """The entries of ``idx`` whose configuration is free; the others get a collision rejection (with the
+    colliding pairs at the grasp itself, which also tell whether the table is one of them)."""
     if not idx:
         return []
     hits = np.asarray(robot.in_collision(arm, np.asarray(qs, float)), bool)
     bad = [k for k, hit in enumerate(hits) if hit]
-    if where:
-        reasons = [f"collision: {where}"] * len(bad)
+    if pregrasp:
+        rejections = [Rejection(Rejected.PREGRASP_COLLISION)] * len(bad)
     else:
         reports = robot.collision_reports(arm, np.asarray([qs[k] for k in bad], float)) if bad else []
-        reasons = ["collision: " + (", ".join(f"{a}/{b}" for a, b in pairs) or "unknown pair") for pairs in reports]
-    for k, reason in zip(bad, reasons, strict=True):
-        out[jobs[idx[k]][0]].rejected[keys[idx[k]]] = reason
+        rejections = [
+            Rejection(
+                Rejected.ARM_COLLISION,
+                ", ".join(f"{a}/{b}" for a, b in pairs) or "unknown pair",
+                any("table" in (a, b) for a, b in pairs),
+            )
+            for pairs in reports
+        ]
+    for k, rejection in zip(bad, rejections, strict=True):
+        out[jobs[idx[k]][0]].rejected[keys[idx[k]]] = rejection
     return [i for i, hit in zip(idx, hits, strict=True) if not hit]

@@ -17,10 +17,12 @@ virtual ``START`` node to the virtual ``GOAL`` node is the keyframe sequence.
 
 from __future__ import annotations
 
+import enum
 import itertools
+from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import networkx as nx
 import numpy as np
@@ -50,14 +52,63 @@ class PoseSlot:
     T_world_part: np.ndarray = field(compare=False, hash=False, repr=False)
 
 
+class Rejected(enum.StrEnum):
+    """Why a grasp is unusable at a slot; the value is how a failure reason counts it."""
+
+    NOT_FROM_ABOVE = "approach not from above"
+    CANDIDATE_CAP = "beyond the candidate cap"
+    HAND_COLLISION = "hand in collision"
+    NO_IK = "no IK solution"
+    PREGRASP_NO_IK = "no IK solution at the pre-grasp pose"
+    ARM_COLLISION = "arm in collision"
+    PREGRASP_COLLISION = "arm in collision at the pre-grasp pose"
+
+
+@dataclass(frozen=True)
+class Rejection:
+    """One grasp's rejection at a slot: its kind, whether the table is in the collision, and the detail."""
+
+    kind: Rejected
+    detail: str = ""
+    """E.g. the colliding pair (``"hand/finger0 with table"``, ``"LARM_JOINT5_Link/table"``) or the IK's reason."""
+    table: bool = False
+    """The table is one of the colliding bodies."""
+
+    def __str__(self) -> str:
+        return f"{self.kind.value}: {self.detail}" if self.detail else self.kind.value
+
+
 @dataclass
 class GraspFeasibility:
     """Grasps usable at one slot: ``(grasp_id, arm) -> q`` (joint positions, radians)."""
 
     slot: PoseSlot
     solutions: dict[tuple[int, str], np.ndarray]
-    rejected: dict[tuple[int, str], str] = field(default_factory=dict)
-    """Why the other grasps are unusable here (``"ik"``, ``"collision: LARM_JOINT5_Link/table"``)."""
+    rejected: dict[tuple[int, str], Rejection] = field(default_factory=dict)
+    """Why the other grasps are unusable here."""
+
+    def counts(self) -> dict[str, Any]:
+        """Structured failure counts at this slot: ``candidates`` (grasp variants tried), ``feasible``,
+        ``rejected`` (kind value -> count) and ``with_table`` (kind value -> count of those hitting the table)."""
+        kinds = Counter(r.kind.value for r in self.rejected.values())
+        table = Counter(r.kind.value for r in self.rejected.values() if r.table)
+        return {
+            "slot": self.slot.name,
+            "candidates": len(self.solutions) + len(self.rejected),
+            "feasible": len(self.solutions),
+            "rejected": dict(kinds.most_common()),
+            "with_table": dict(table.most_common()),
+        }
+
+    def summary(self) -> str:
+        """The counts in words: ``"of 80 grasp variants, 40 approach not from above, 12 hand in collision
+        (9 with the table), ..."``."""
+        c = self.counts()
+        parts = [
+            f"{n} {kind}" + (f" ({c['with_table'][kind]} with the table)" if kind in c["with_table"] else "")
+            for kind, n in c["rejected"].items()
+        ]
+        return f"of {c['candidates']} grasp variants at {c['slot']}, " + (", ".join(parts) or "none rejected")
 
 
 @dataclass
@@ -69,6 +120,10 @@ class KeyframeSearch:
     cost: float = float("inf")
     regrasps: int = 0
     reason: str | None = None
+    cut: Literal["start", "goal", "between"] | None = None
+    """Where a failed search is cut off: no usable edge at the start, at the goal, or no path between them."""
+    components: int | None = None
+    """When cut ``"between"``: connected components of the grasp nodes left after the banned edges."""
 
 
 def build_regrasp_graph(
@@ -132,15 +187,20 @@ def search_keyframes(G: nx.Graph, *, banned_edges: Iterable[tuple[Node, Node]] =
     banned = {frozenset(e) for e in banned_edges}
     view = nx.subgraph_view(G, filter_edge=lambda a, b: frozenset((a, b)) not in banned)
     if view.degree(START) == 0:
-        return KeyframeSearch(False, reason="no grasp is feasible at the start pose (IK or collision)")
+        return KeyframeSearch(False, reason="no grasp is feasible at the start pose (IK or collision)", cut="start")
     if view.degree(GOAL) == 0:
-        return KeyframeSearch(False, reason="no grasp is feasible at the goal pose (IK or collision)")
+        return KeyframeSearch(False, reason="no grasp is feasible at the goal pose (IK or collision)", cut="goal")
     try:
         cost, path = nx.single_source_dijkstra(view, START, GOAL, weight="weight")
     except nx.NetworkXNoPath:
+        grasps = view.subgraph([n for n in view if n not in (START, GOAL)])
+        k = nx.number_connected_components(grasps)
         return KeyframeSearch(
             False,
-            reason="no grasp is shared between the start and goal layers, even through intermediate placements",
+            reason="no grasp is shared between the start and goal layers, even through intermediate placements "
+            f"(the {grasps.number_of_nodes()} feasible grasps form {k} unconnected groups)",
+            cut="between",
+            components=k,
         )
     nodes = [n for n in path if n not in (START, GOAL)]
     regrasps = sum(G.edges[a, b]["kind"] == "transit" for a, b in itertools.pairwise(nodes))

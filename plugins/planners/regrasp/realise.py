@@ -6,7 +6,7 @@ lift, a free carry to above the place slot, a straight place or insertion,
 release, a straight retreat; at the end every arm goes home. Two passes:
 first every keyframe (IK) and straight line (Cartesian IK and collision),
 each free motion's end checked for collision and left as a query; then the
-motion planner's queries, in order. A failure raises :class:`MotionFailure`
+motion planner's queries, in order. A failure raises :class:`.motions.MotionFailure`
 naming the graph edge (and, when no path through it can succeed, the node)
 to ban before the graph is searched again.
 
@@ -25,21 +25,18 @@ import numpy as np
 from asmteach.core.failures import FailureKind
 from asmteach.core.interfaces import MotionPlanner, Obstacle, PartModel, Robot
 from asmteach.core.models import Grasp, GripperEvent
-from asmteach.core.trajectory.batch import batched, inverse_clearance_cost
-from asmteach.core.trajectory.interpolate import densify
 from asmteach.plugins.planners.regrasp.feasibility import approach_offset, variant_tcp
 from asmteach.plugins.planners.regrasp.graph import GOAL, START, KeyframeSearch, PoseSlot
+from asmteach.plugins.planners.regrasp.motions import (
+    Checker,
+    MotionFailure,
+    free_motion,
+    set_world,
+    straight_line,
+)
 from asmteach.plugins.planners.regrasp.settings import AssemblySettings
 
-__all__ = [
-    "MotionFailure",
-    "PlaceGoal",
-    "Step",
-    "cartesian_path",
-    "realise_keyframes",
-    "reset_world",
-    "set_world",
-]
+__all__ = ["PlaceGoal", "Step", "realise_keyframes"]
 
 
 @dataclass(frozen=True)
@@ -64,77 +61,6 @@ class Step:
     arm: str
     path: np.ndarray | None = None
     event: GripperEvent | None = None
-
-
-class MotionFailure(Exception):
-    """A keyframe motion failed; ``edge`` is the graph edge to ban, ``node`` a node whose every edge is banned."""
-
-    def __init__(self, edge: tuple[Any, Any], reason: str, node: Any | None = None, timed_out: bool = False) -> None:
-        super().__init__(reason)
-        self.edge = edge
-        self.reason = reason
-        self.node = node
-        self.timed_out = timed_out  # a wall-clock limit, not the search, ended it: the result depends on the load
-
-
-def cartesian_path(
-    robot: Robot, arm: str, q_start: np.ndarray, T_goal: np.ndarray, step: float
-) -> tuple[np.ndarray | None, str | None]:
-    """Joint path moving the TCP on a straight line to ``T_goal`` (orientation kept; IK per step)."""
-    T0 = robot.fk(arm, q_start)
-    dist = float(np.linalg.norm(T_goal[:3, 3] - T0[:3, 3]))
-    n = max(2, int(np.ceil(dist / step)) + 1)
-    path = [np.asarray(q_start, float)]
-    for s in np.linspace(0.0, 1.0, n)[1:]:
-        T = T_goal.copy()
-        T[:3, 3] = (1.0 - s) * T0[:3, 3] + s * T_goal[:3, 3]
-        res = robot.ik(arm, T, q_seed=path[-1])
-        if not res.success or res.q is None or getattr(res, "flipped", False):
-            return None, f"IK fails {s * dist * 1000:.0f} mm along the straight line"
-        if np.max(np.abs(res.q - path[-1])) > 0.3:
-            return None, "the straight line crosses a singularity or a change of IK branch"
-        path.append(np.asarray(res.q, float))
-    return np.asarray(path), None
-
-
-def set_world(robot: Robot, world: Sequence[Obstacle], *extra: Obstacle) -> None:
-    """The robot's obstacles: ``world`` and ``extra`` without the table, which the robot models itself."""
-    robot.set_obstacles([o for o in world if o.name != "table"] + list(extra))
-
-
-def reset_world(robot: Robot, world: Sequence[Obstacle]) -> None:
-    """The robot's obstacles hold ``world`` (:func:`set_world`) and no arm holds anything."""
-    set_world(robot, world)
-    for arm in robot.arms:
-        robot.attach(arm, None)
-
-
-class _Checker:
-    """Collision checks of one arm's paths against the robot's current world.
-
-    ``valid`` and ``cost`` answer one configuration and, through ``.batch``,
-    many at once (the robot's checker is ~25x cheaper per configuration in a
-    batch; T-RRT checks whole edges that way).
-    """
-
-    def __init__(self, robot: Robot, arm: str) -> None:
-        self.robot, self.arm = robot, arm
-        self.valid = batched(
-            lambda q: not bool(robot.in_collision(arm, np.asarray(q, float)[None, :])[0]),
-            lambda qs: ~np.asarray(robot.in_collision(arm, qs), bool),
-        )
-        # T-RRT climbs this cost map: high within a few mm of obstacles, flat beyond 10 cm (metres),
-        # so clearances beyond 10 cm need not be measured exactly.
-        cap = 0.10
-        clearance = batched(
-            lambda q: float(robot.clearance(arm, np.asarray(q, float)[None, :], upto=cap)[0]),
-            lambda qs: np.asarray(robot.clearance(arm, qs, upto=cap), float),
-        )
-        self.cost = inverse_clearance_cost(clearance, floor=0.005, cap=cap)
-
-    def first_hit(self, path: np.ndarray, ignore: Sequence[str] = ()) -> int | None:
-        hits = self.robot.in_collision(self.arm, np.asarray(path, float), ignore=ignore)
-        return int(np.argmax(hits)) if np.any(hits) else None
 
 
 @dataclass(frozen=True)
@@ -237,7 +163,7 @@ def realise_keyframes(
         arm, vid = pick[2], pick[1]
         slot_pick, slot_place = G.nodes[pick]["slot"], G.nodes[place]["slot"]
         final = place[0] == goal.slot.name and j == len(nodes) - 1
-        chk = _Checker(robot, arm)
+        chk = Checker(robot, arm)
 
         # 0. the other arms go home (the grasp graph was screened with them there) and stay put
         robot.attach(arm, None)
@@ -275,7 +201,9 @@ def realise_keyframes(
         # 2. straight approach without the part as obstacle (the fingers go around it)
         extra = ()
         set_world(robot, world)
-        down = _line(robot, chk, arm, pre.q, T_grasp, settings, (into, pick), f"approach at {pick[0]}", node=pick)
+        down = straight_line(
+            robot, chk, arm, pre.q, T_grasp, settings, (into, pick), f"approach at {pick[0]}", node=pick
+        )
         steps.append(Step(f"approach grasp {vid}", "path", arm, down))
         keyframes.append({"name": f"grasp_{pick[0]}", "arm": arm, "q": down[-1].tolist()})
         width = grasps[vid // 2].width
@@ -293,7 +221,7 @@ def realise_keyframes(
         # 3. lift straight up (the part leaves the table it touched)
         T_lift = T_tcp_now.copy()
         T_lift[2, 3] += settings.lift
-        up = _line(
+        up = straight_line(
             robot,
             chk,
             arm,
@@ -334,7 +262,7 @@ def realise_keyframes(
         T_release = T_place_tcp.copy()
         if goal.on_table or not final:
             T_release[2, 3] += settings.release_gap
-        last = _line(
+        last = straight_line(
             robot,
             chk,
             arm,
@@ -358,7 +286,7 @@ def realise_keyframes(
         # the opened fingers back off past the part they let go of, now an obstacle where it was placed
         extra = (Obstacle(part.name, part.mesh, T_part),)
         set_world(robot, world, *extra)
-        back = _line(
+        back = straight_line(
             robot,
             chk,
             arm,
@@ -388,65 +316,6 @@ def realise_keyframes(
     clearances: list[float] = []
     for m in queries:
         m.scene.apply(robot, world)
-        steps[m.step].path = _free(robot, planner, m.arm, m.q_a, m.q_b, settings, m.edge, m.what, clearances)
+        steps[m.step].path = free_motion(robot, planner, m.arm, m.q_a, m.q_b, settings, m.edge, m.what, clearances)
     end.apply(robot, world)
     return steps, q_cur, keyframes, (min(clearances) if clearances else float("nan"))
-
-
-def _free(
-    robot: Robot,
-    planner: MotionPlanner,
-    arm: str,
-    q_a: np.ndarray,
-    q_b: np.ndarray,
-    settings: AssemblySettings,
-    edge: tuple[Any, Any],
-    what: str,
-    clearances: list[float],
-) -> np.ndarray:
-    """A collision-free joint path from the motion planner, cost = inverse clearance;
-    its minimum clearance (metres) is appended to ``clearances``."""
-    chk = _Checker(robot, arm)
-    lo, hi = robot.joint_limits(arm)
-    res = planner.plan(
-        np.asarray(q_a, float),
-        np.asarray(q_b, float),
-        lower=lo,
-        upper=hi,
-        is_valid=chk.valid,
-        cost=chk.cost,
-        time_limit=settings.motion_time_limit,
-    )
-    if not res.success or res.path is None:
-        # The goal configuration itself is in collision (a held part against the robot, say): no motion
-        # to it can succeed, whatever edge leads there.
-        bad_goal = edge[1] if res.kind is FailureKind.GOAL_INVALID else None
-        raise MotionFailure(edge, f"{what}: {res.reason}", node=bad_goal, timed_out=res.kind is FailureKind.TIMEOUT)
-    path = np.asarray(res.path, float)
-    # clearance of the free motion in the world it was planned in, every 0.05 rad (for the statistics)
-    clearances.append(float(np.min(robot.clearance(arm, densify(path, 0.05)))))
-    return path
-
-
-def _line(
-    robot: Robot,
-    chk: _Checker,
-    arm: str,
-    q_from: np.ndarray,
-    T_to: np.ndarray,
-    settings: AssemblySettings,
-    edge: tuple[Any, Any],
-    what: str,
-    ignore: Sequence[str] = (),
-    node: Any | None = None,
-) -> np.ndarray:
-    """A straight TCP line; on failure ``node``, the grasp at the slot the line belongs to, is banned whole."""
-    path, why = cartesian_path(robot, arm, np.asarray(q_from, float), T_to, settings.cartesian_step)
-    if path is None:
-        raise MotionFailure(edge, f"{what}: {why}", node=node)
-    hit = chk.first_hit(path, ignore=ignore)
-    if hit is not None:
-        pairs = robot.collision_report(arm, path[hit])
-        who = ", ".join(f"{a}/{b}" for a, b in pairs[:2]) or "unknown pair"
-        raise MotionFailure(edge, f"{what}: collision at step {hit} ({who})", node=node)
-    return path

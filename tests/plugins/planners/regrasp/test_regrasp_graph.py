@@ -6,6 +6,8 @@ from asmteach.plugins.planners.regrasp.graph import (
     START,
     GraspFeasibility,
     PoseSlot,
+    Rejected,
+    Rejection,
     build_regrasp_graph,
     search_keyframes,
 )
@@ -55,16 +57,46 @@ def test_banned_edge_forces_the_next_best_path():
 
 
 @pytest.mark.parametrize(
-    "layers, reason",
+    "layers, reason, cut",
     [
-        ([feas("start", "start", []), feas("goal", "goal", [1])], "start pose"),
-        ([feas("start", "start", [1]), feas("goal", "goal", [])], "goal pose"),
-        ([feas("start", "start", [1]), feas("goal", "goal", [2])], "no grasp is shared"),
+        ([feas("start", "start", []), feas("goal", "goal", [1])], "start pose", "start"),
+        ([feas("start", "start", [1]), feas("goal", "goal", [])], "goal pose", "goal"),
+        ([feas("start", "start", [1]), feas("goal", "goal", [2])], "no grasp is shared", "between"),
     ],
 )
-def test_failures_say_which_layer(layers, reason):
+def test_failures_say_which_layer(layers, reason, cut):
     res = search_keyframes(build_regrasp_graph(layers))
-    assert not res.success and reason in res.reason
+    assert not res.success and reason in res.reason and res.cut == cut
+
+
+def test_a_cut_graph_counts_its_unconnected_groups():
+    """Start grasps 1, 2 (regrasp on the table joins them), a middle slot sharing nothing, goal grasp 7."""
+    layers = [feas("start", "start", [1, 2]), feas("mid", "middle", [5, 6]), feas("goal", "goal", [7])]
+    res = search_keyframes(build_regrasp_graph(layers))
+    assert not res.success and res.cut == "between" and res.components == 3
+    assert "the 5 feasible grasps form 3 unconnected groups" in res.reason
+
+
+def test_rejections_are_counted_by_kind_and_table():
+    f = feas("start", "start", [1])
+    f.rejected = {
+        (2, ""): Rejection(Rejected.NOT_FROM_ABOVE),
+        (4, ""): Rejection(Rejected.HAND_COLLISION, "hand/finger0 with table", table=True),
+        (6, ""): Rejection(Rejected.HAND_COLLISION, "hand/palm with box"),
+        (8, "left"): Rejection(Rejected.NO_IK, "unreachable"),
+        (10, "left"): Rejection(Rejected.ARM_COLLISION, "LARM_JOINT5_Link/table", table=True),
+    }
+    c = f.counts()
+    assert c["candidates"] == 6 and c["feasible"] == 1
+    assert c["rejected"] == {
+        "hand in collision": 2,
+        "approach not from above": 1,
+        "no IK solution": 1,
+        "arm in collision": 1,
+    }
+    assert c["with_table"] == {"hand in collision": 1, "arm in collision": 1}
+    assert f.summary().startswith("of 6 grasp variants at start, 2 hand in collision (1 with the table), ")
+    assert str(f.rejected[(8, "left")]) == "no IK solution: unreachable"
 
 
 def test_transfer_needs_the_same_arm():

@@ -242,3 +242,17 @@ def test_re_searches_are_counted_and_wall_clock_cuts_reported(peg) -> None:
     assert not res.success
     assert "1 keyframe sequences tried (max_attempts)" in (res.reason or "")
     assert res.stats["wall_clock_cuts"] == ["motion to the pre-grasp at start: timeout after 5.0 s"]
+
+
+def test_a_goal_no_grasp_reaches_says_how_many_fail_and_why(peg) -> None:
+    """The peg upside down at its goal: every grasp approaches from below there, past the wrist limit; the
+    reason counts them, and the result holds the counts per slot and where the time went."""
+    flipped = geometry.from_rotation(Rotation.from_euler("x", np.pi).as_matrix() @ LYING, [*GOAL_XY, 0.3])
+    res, _ = transfer(peg, AssemblySettings(placement_yaws=2, max_placements=0), T_goal=flipped)
+    assert not res.success and res.stats["cut"] == "goal"
+    assert (
+        "no grasp is feasible at the goal pose (IK or collision): of 3 grasp variants at goal, 3 no IK " in res.reason
+    )
+    assert " s spent: " in res.reason and " s on motions" in res.reason
+    goal = next(c for c in res.keyframes if c["slot"] == "goal")
+    assert goal == {"slot": "goal", "candidates": 3, "feasible": 0, "rejected": {"no IK solution": 3}, "with_table": {}}

@@ -12,7 +12,7 @@ from asmteach.core.arm.sim import PyBulletWorld
 from asmteach.core.errors import UserError
 from asmteach.core.models import GripperEvent, PartSpec, Plan, PlanSegment, Primitive, SolidSpec, TablePlane, Trajectory
 from asmteach.core.parts import build_part
-from asmteach.plugins.planners.regrasp.realise import cartesian_path
+from asmteach.plugins.planners.regrasp.motions import cartesian_path
 from asmteach.plugins.robots.nextage.robot import NextagePyBullet
 
 TABLE = TablePlane(height=0.0)

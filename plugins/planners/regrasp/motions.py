@@ -1,0 +1,162 @@
+"""The motions of a transfer, one at a time: free motions from the motion planner, straight TCP lines.
+
+Each raises :class:`MotionFailure` naming the regrasp-graph edge to ban (and,
+when no path through it can succeed, the node) so the graph can be searched
+again; a free motion's failure is read from the planner's
+:class:`~asmteach.core.failures.FailureKind`, never from its reason string.
+
+Frames: ``T_world_*`` 4x4 in metres; joint paths in radians.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from asmteach.core.failures import FailureKind
+from asmteach.core.interfaces import MotionPlanner, Obstacle, Robot
+from asmteach.core.trajectory.batch import batched, inverse_clearance_cost
+from asmteach.core.trajectory.interpolate import densify
+from asmteach.plugins.planners.regrasp.settings import AssemblySettings
+
+__all__ = [
+    "Checker",
+    "MotionFailure",
+    "cartesian_path",
+    "free_motion",
+    "reset_world",
+    "set_world",
+    "straight_line",
+]
+
+
+class MotionFailure(Exception):
+    """A keyframe motion failed; ``edge`` is the graph edge to ban, ``node`` a node whose every edge is banned."""
+
+    def __init__(self, edge: tuple[Any, Any], reason: str, node: Any | None = None, timed_out: bool = False) -> None:
+        super().__init__(reason)
+        self.edge = edge
+        self.reason = reason
+        self.node = node
+        self.timed_out = timed_out  # a wall-clock limit, not the search, ended it: the result depends on the load
+
+
+def cartesian_path(
+    robot: Robot, arm: str, q_start: np.ndarray, T_goal: np.ndarray, step: float
+) -> tuple[np.ndarray | None, str | None]:
+    """Joint path moving the TCP on a straight line to ``T_goal`` (orientation kept; IK per step)."""
+    T0 = robot.fk(arm, q_start)
+    dist = float(np.linalg.norm(T_goal[:3, 3] - T0[:3, 3]))
+    n = max(2, int(np.ceil(dist / step)) + 1)
+    path = [np.asarray(q_start, float)]
+    for s in np.linspace(0.0, 1.0, n)[1:]:
+        T = T_goal.copy()
+        T[:3, 3] = (1.0 - s) * T0[:3, 3] + s * T_goal[:3, 3]
+        res = robot.ik(arm, T, q_seed=path[-1])
+        if not res.success or res.q is None or getattr(res, "flipped", False):
+            return None, f"IK fails {s * dist * 1000:.0f} mm along the straight line"
+        if np.max(np.abs(res.q - path[-1])) > 0.3:
+            return None, "the straight line crosses a singularity or a change of IK branch"
+        path.append(np.asarray(res.q, float))
+    return np.asarray(path), None
+
+
+def set_world(robot: Robot, world: Sequence[Obstacle], *extra: Obstacle) -> None:
+    """The robot's obstacles: ``world`` and ``extra`` without the table, which the robot models itself."""
+    robot.set_obstacles([o for o in world if o.name != "table"] + list(extra))
+
+
+def reset_world(robot: Robot, world: Sequence[Obstacle]) -> None:
+    """The robot's obstacles hold ``world`` (:func:`set_world`) and no arm holds anything."""
+    set_world(robot, world)
+    for arm in robot.arms:
+        robot.attach(arm, None)
+
+
+class Checker:
+    """Collision checks of one arm's paths against the robot's current world.
+
+    ``valid`` and ``cost`` answer one configuration and, through ``.batch``,
+    many at once (the robot's checker is ~25x cheaper per configuration in a
+    batch; T-RRT checks whole edges that way).
+    """
+
+    def __init__(self, robot: Robot, arm: str) -> None:
+        self.robot, self.arm = robot, arm
+        self.valid = batched(
+            lambda q: not bool(robot.in_collision(arm, np.asarray(q, float)[None, :])[0]),
+            lambda qs: ~np.asarray(robot.in_collision(arm, qs), bool),
+        )
+        # T-RRT climbs this cost map: high within a few mm of obstacles, flat beyond 10 cm (metres),
+        # so clearances beyond 10 cm need not be measured exactly.
+        cap = 0.10
+        clearance = batched(
+            lambda q: float(robot.clearance(arm, np.asarray(q, float)[None, :], upto=cap)[0]),
+            lambda qs: np.asarray(robot.clearance(arm, qs, upto=cap), float),
+        )
+        self.cost = inverse_clearance_cost(clearance, floor=0.005, cap=cap)
+
+    def first_hit(self, path: np.ndarray, ignore: Sequence[str] = ()) -> int | None:
+        hits = self.robot.in_collision(self.arm, np.asarray(path, float), ignore=ignore)
+        return int(np.argmax(hits)) if np.any(hits) else None
+
+
+def free_motion(
+    robot: Robot,
+    planner: MotionPlanner,
+    arm: str,
+    q_a: np.ndarray,
+    q_b: np.ndarray,
+    settings: AssemblySettings,
+    edge: tuple[Any, Any],
+    what: str,
+    clearances: list[float],
+) -> np.ndarray:
+    """A collision-free joint path from the motion planner, cost = inverse clearance;
+    its minimum clearance (metres) is appended to ``clearances``."""
+    chk = Checker(robot, arm)
+    lo, hi = robot.joint_limits(arm)
+    res = planner.plan(
+        np.asarray(q_a, float),
+        np.asarray(q_b, float),
+        lower=lo,
+        upper=hi,
+        is_valid=chk.valid,
+        cost=chk.cost,
+        time_limit=settings.motion_time_limit,
+    )
+    if not res.success or res.path is None:
+        # The goal configuration itself is in collision (a held part against the robot, say): no motion
+        # to it can succeed, whatever edge leads there.
+        bad_goal = edge[1] if res.kind is FailureKind.GOAL_INVALID else None
+        raise MotionFailure(edge, f"{what}: {res.reason}", node=bad_goal, timed_out=res.kind is FailureKind.TIMEOUT)
+    path = np.asarray(res.path, float)
+    # clearance of the free motion in the world it was planned in, every 0.05 rad (for the statistics)
+    clearances.append(float(np.min(robot.clearance(arm, densify(path, 0.05)))))
+    return path
+
+
+def straight_line(
+    robot: Robot,
+    chk: Checker,
+    arm: str,
+    q_from: np.ndarray,
+    T_to: np.ndarray,
+    settings: AssemblySettings,
+    edge: tuple[Any, Any],
+    what: str,
+    ignore: Sequence[str] = (),
+    node: Any | None = None,
+) -> np.ndarray:
+    """A straight TCP line; on failure ``node``, the grasp at the slot the line belongs to, is banned whole."""
+    path, why = cartesian_path(robot, arm, np.asarray(q_from, float), T_to, settings.cartesian_step)
+    if path is None:
+        raise MotionFailure(edge, f"{what}: {why}", node=node)
+    hit = chk.first_hit(path, ignore=ignore)
+    if hit is not None:
+        pairs = robot.collision_report(arm, path[hit])
+        who = ", ".join(f"{a}/{b}" for a, b in pairs[:2]) or "unknown pair"
+        raise MotionFailure(edge, f"{what}: collision at step {hit} ({who})", node=node)
+    return path
