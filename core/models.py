@@ -355,13 +355,13 @@ class HandSpec(StrictModel):
     on the TCP's z.
     """
 
-    name: str
+    name: str = Field(description="the gripper's name")
     max_width: float = Field(gt=0.0, description="full stroke, metres")
-    min_width: float = Field(0.0, ge=0.0)
+    min_width: float = Field(0.0, ge=0.0, description="narrowest opening, metres")
     finger_size: Vec3 = Field(description="one finger box: thickness along y, depth along x, length along z")
     pad_size: tuple[float, float] = Field(description="contact pad: along x, along z, metres")
-    palm_center: Vec3
-    palm_size: Vec3
+    palm_center: Vec3 = Field(description="centre of the palm box in the TCP frame, metres")
+    palm_size: Vec3 = Field(description="palm box extents along TCP x, y, z, metres")
     max_force: float = Field(40.0, gt=0.0, description="gripping force, newtons")
 
 

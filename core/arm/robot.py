@@ -48,11 +48,11 @@ class CameraMount(StrictModel):
 class ArmRobotSettings(StrictModel):
     """Settings every simulated arm robot shares (metres, radians, seconds, newtons)."""
 
-    table_height: float = Field(0.0, ge=-2.0, le=2.0, description="world z of the table top")
-    table_center: tuple[float, float] = Field((0.45, 0.0), description="table centre x, y (world)")
-    table_size: tuple[float, float] = Field((0.6, 1.2), description="table extent along x, y")
+    table_height: float = Field(0.0, ge=-2.0, le=2.0, description="world z of the table top, metres")
+    table_center: tuple[float, float] = Field((0.45, 0.0), description="table centre x, y (world), metres")
+    table_size: tuple[float, float] = Field((0.6, 1.2), description="table extent along x, y, metres")
     gui: bool = Field(False, description="open PyBullet's window (needs a display)")
-    ik: IKSettings = Field(default_factory=IKSettings)
+    ik: IKSettings = Field(default_factory=IKSettings, description="the inverse-kinematics solver")
     speed_scale: float = Field(1.0, gt=0.0, le=1.0, description="fraction of each joint's speed limit used")
     jump_tolerance: float = Field(1.05, ge=1.0, description="a trajectory may exceed the speed limits by this factor")
     start_tolerance: float = Field(0.02, gt=0.0, description="radians between the current q and a trajectory's start")
@@ -64,7 +64,7 @@ class ArmRobotSettings(StrictModel):
         le=1.0,
         description="positionGain of the simulated joint servos; PyBullet's default 0.1 leaves ~1 mrad steady error",
     )
-    camera: CameraMount = Field(default_factory=CameraMount)
+    camera: CameraMount = Field(default_factory=CameraMount, description="where the simulated camera sits")
 
 
 @dataclass

@@ -86,3 +86,20 @@ def test_plugins_settings_of_one_role_and_a_broken_plugin(toy_dist, capsys):
     ]
     assert "broken_detector" in captured.out and "import error" in captured.out
     assert "run config" not in captured.out and "teacher.settings" not in captured.out
+
+
+def test_every_builtin_setting_is_described() -> None:
+    """Each setting (a section's own keys are described by theirs) says what it is, as plugins --settings shows."""
+    from asmteach.core import registry
+    from asmteach.core.settings_listing import describe_settings
+
+    undescribed = []
+    for info in registry.discover():
+        if info.distribution != "asmteach":
+            continue
+        assert info.cls is not None, info.error
+        for model in (info.cls.Settings, getattr(info.cls, "DemoSettings", None)):
+            rows = describe_settings(model) if model is not None else []
+            sections = {key for key, *_ in rows if any(r[0].startswith(key + ".") for r in rows)}
+            undescribed += [f"{info.name}: {key}" for key, _, _, text in rows if not text and key not in sections]
+    assert not undescribed, undescribed

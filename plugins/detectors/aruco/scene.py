@@ -43,7 +43,7 @@ class DemoSettings(StrictModel):
     lighting: float = Field(0.35, ge=0.0, le=0.9, description="strength of the uneven illumination (0: even)")
     hands: int = Field(2, ge=0, le=4, description="hand-like occluders per frame")
     supersample: int = Field(4, ge=1, le=8, description="samples per pixel side (anti-aliasing)")
-    image_format: Literal["jpg", "png"] = "jpg"
+    image_format: Literal["jpg", "png"] = Field("jpg", description="file format of the written frames")
 
 
 @dataclass

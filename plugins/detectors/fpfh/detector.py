@@ -59,13 +59,15 @@ class FpfhSettings(StrictModel):
         description="camera centre in the world frame, metres, when detect() is not given one (orients the "
         "cluster's normals, casts the verification's rays); no default",
     )
-    segment: SegmentSettings = Field(default_factory=SegmentSettings)
-    refine: RefineSettings = Field(default_factory=RefineSettings)
+    segment: SegmentSettings = Field(
+        default_factory=SegmentSettings, description="table removal and clustering of the cloud"
+    )
+    refine: RefineSettings = Field(default_factory=RefineSettings, description="ICP refinement and verification")
     voxel: float = Field(0.004, gt=0.0, description="voxel size of the clouds FPFH is computed on")
     normal_radius: float = Field(0.012, gt=0.0, description="normal estimation radius of the cluster")
     feature_radius: float = Field(0.025, gt=0.0, description="FPFH radius")
     ransac_iterations: int = Field(50000, ge=100, description="RANSAC iterations per attempt")
-    ransac_confidence: float = Field(0.999, gt=0.0, lt=1.0)
+    ransac_confidence: float = Field(0.999, gt=0.0, lt=1.0, description="RANSAC stops once this sure (0..1)")
     mutual_filter: bool = Field(True, description="keep only mutually nearest feature matches")
     attempts: int = Field(3, ge=1, description="RANSAC rounds until a pose verifies")
     max_clusters: int = Field(3, ge=1, description="largest plausible clusters tried, biggest first")

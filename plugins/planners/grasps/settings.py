@@ -92,6 +92,6 @@ class AntipodalSettings(StrictModel):
         description="resting poses of the part (most probable first) that each get, per contact pair, the "
         "orientation approaching most steeply from above, and their own buckets in the selection",
     )
-    weights: ScoreWeights = Field(default_factory=ScoreWeights)
+    weights: ScoreWeights = Field(default_factory=ScoreWeights, description="weights of the grasp score's terms")
     cache: bool = Field(True, description="read and write the on-disk cache")
     cache_dir: str | None = Field(None, description="cache folder; default $ASMTEACH_CACHE_DIR or ~/.cache/asmteach")

@@ -105,7 +105,7 @@ class StablePlacementCorrector(Corrector):
         table_band: float = Field(0.002, ge=0.0, description="metres; points this close to the table are ignored")
         icp_max_correspondence: float = Field(0.02, gt=0.0, description="metres, first ICP inlier radius")
         icp_min_correspondence: float = Field(0.003, gt=0.0, description="metres, final ICP inlier radius")
-        icp_max_iterations: int = Field(40, ge=1)
+        icp_max_iterations: int = Field(40, ge=1, description="iterations per ICP run")
         icp_yaw_starts_deg: list[float] = Field(
             default_factory=lambda: [0.0, -12.0, 12.0, -25.0, 25.0],
             description="yaw offsets (degrees) of the ICP starts; the best fit wins",

@@ -164,6 +164,7 @@ class UrdfArmSettings(ArmRobotSettings):
             )
         },
         min_length=1,
+        description="each arm by name: its joints, TCP link, home configuration and fingers (default: a Panda)",
     )
     hand: HandSpec | None = Field(
         None, description="gripper geometry in the TCP frame; default: the generated gripper's, else the Franka Hand"
@@ -177,9 +178,9 @@ class UrdfArmSettings(ArmRobotSettings):
         description="plan with the convex hull of each STL collision mesh, the solid PyBullet collides "
         "(a concave vendor link otherwise passes the planner's check and hits in the simulator)",
     )
-    table_center: tuple[float, float] = (0.5, 0.0)
-    table_size: tuple[float, float] = (0.6, 0.8)
-    table_height: float = 0.0
+    table_center: tuple[float, float] = Field((0.5, 0.0), description="table centre x, y (world), metres")
+    table_size: tuple[float, float] = Field((0.6, 0.8), description="table extent along x, y, metres")
+    table_height: float = Field(0.0, description="world z of the table top, metres")
 
     @model_validator(mode="after")
     def _one_hand(self) -> UrdfArmSettings:
