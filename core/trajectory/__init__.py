@@ -1,3 +1,7 @@
-"""Joint-path tools every planner and robot shares: batched per-configuration checks and cost maps
-(:mod:`.batch`), interpolation (:mod:`.interpolate`), time parametrisation (:mod:`.timing`, rest to rest;
-:mod:`.blended`, time-optimal through blended corners). Joint values in radians, times in seconds."""
+"""Joint-path tools every planner and robot shares.
+
+Batched per-configuration checks and cost maps (:mod:`.batch`), interpolation
+(:mod:`.interpolate`), time parametrisation (:mod:`.timing`, rest to rest;
+:mod:`.blended`, time-optimal through the corners :mod:`.blended_path` rounds).
+Joint values in radians, times in seconds.
+"""

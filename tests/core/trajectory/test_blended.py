@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from asmteach.core.errors import UserError
-from asmteach.core.trajectory.blended import BlendedPath, BlendReport, time_optimal
+from asmteach.core.trajectory.blended import BlendReport, time_optimal
+from asmteach.core.trajectory.blended_path import BlendedPath
 from asmteach.core.trajectory.timing import time_parametrize
 
 V = np.array([1.0, 0.5, 2.0])  # rad/s
