@@ -1,9 +1,9 @@
-"""Joint-space motion planners on OMPL 2: T-RRT (written here), OMPL's RRTConnect, and time parametrisation.
+"""Joint-space motion planners on OMPL 2: T-RRT (written here) and OMPL's RRTConnect.
 
 Modules: :mod:`.space` (OMPL state space and validity from python callables),
-:mod:`.trrt` (Transition-based RRT), :mod:`.ompl_planners` (OMPL's own planners),
-:mod:`.blended` (time-optimal timing through all waypoints with toppra, corners blended within the checked band),
-:mod:`.timing` (the rest-to-rest trapezoid at every waypoint: the old timing, kept as reference and fall-back),
-:mod:`.interpolate` (path densification and re-checking), :mod:`.toyworld`
-(joint-space box/sphere worlds for tests and benchmarks).
+:mod:`.query` (settings, query checks and path finishing every planner here shares),
+:mod:`.trrt` (Transition-based RRT) with :mod:`.tree` (its trees and batched checks),
+:mod:`.shortcut` (batched path shortening), :mod:`.ompl_planners` (OMPL's own planners),
+:mod:`.toyworld` (joint-space box/sphere worlds for tests and benchmarks). Interpolation, batching
+and time parametrisation are the core's (:mod:`asmteach.core.trajectory`), shared with the other planners.
 """

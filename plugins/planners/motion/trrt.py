@@ -48,7 +48,6 @@ bidirectional RRT with expansion control.
 
 from __future__ import annotations
 
-import enum
 import math
 import time
 from collections.abc import Callable
@@ -70,6 +69,7 @@ from asmteach.plugins.planners.motion.query import (
     shorten_batched,
 )
 from asmteach.plugins.planners.motion.space import JointSpace, seed_ompl
+from asmteach.plugins.planners.motion.tree import Checks, Grow, Tree
 
 __all__ = ["TRRTPlanner", "TRRTSettings"]
 
@@ -106,47 +106,6 @@ class TRRTSettings(MotionSettings):
     max_iterations: int = Field(200_000, ge=1, description="Upper bound on tree-growing iterations per query.")
 
 
-class _Grow(enum.Enum):
-    TRAPPED = 0
-    ADVANCED = 1
-    REACHED = 2
-
-
-class _Tree:
-    """Nodes ``(n, dof)`` radians with parent indices and cached costs; the root is node 0."""
-
-    def __init__(self, root: np.ndarray, cost: float, is_start: bool) -> None:
-        self.is_start = is_start
-        self.nodes = np.empty((256, root.size))
-        self.parents = np.empty(256, dtype=np.int64)
-        self.costs = np.empty(256)
-        self.n = 0
-        self.add(root, -1, cost)
-
-    def add(self, q: np.ndarray, parent: int, cost: float) -> int:
-        if self.n == len(self.nodes):
-            grow = len(self.nodes)
-            self.nodes = np.concatenate([self.nodes, np.empty_like(self.nodes)])
-            self.parents = np.concatenate([self.parents, np.empty(grow, dtype=np.int64)])
-            self.costs = np.concatenate([self.costs, np.empty(grow)])
-        self.nodes[self.n], self.parents[self.n], self.costs[self.n] = q, parent, cost
-        self.n += 1
-        return self.n - 1
-
-    def nearest(self, q: np.ndarray) -> tuple[int, float]:
-        diff = self.nodes[: self.n] - q
-        d2 = np.einsum("ij,ij->i", diff, diff)
-        i = int(np.argmin(d2))
-        return i, math.sqrt(float(d2[i]))
-
-    def chain(self, i: int) -> np.ndarray:
-        """Nodes from the root to node ``i``."""
-        idx = [i]
-        while self.parents[idx[-1]] >= 0:
-            idx.append(int(self.parents[idx[-1]]))
-        return self.nodes[np.array(idx[::-1])].copy()
-
-
 class _Transition:
     """The transition test with self-tuning temperature (Jaillet et al. 2008, Devaurs et al. 2013)."""
 
@@ -180,61 +139,6 @@ class _Transition:
         self.temperature *= math.exp(self.cfg.temperature_rise)
         self.rejected += 1
         return False
-
-
-class _Checks:
-    """State and motion validity and costs, batched when the callables offer ``batch``; counts the calls."""
-
-    def __init__(
-        self,
-        space: JointSpace,
-        is_valid: Callable[[np.ndarray], bool],
-        cost: Callable[[np.ndarray], float] | None,
-    ) -> None:
-        self.space = space
-        self.is_valid = is_valid
-        self.valid_batch = getattr(is_valid, "batch", None)
-        self.cost_fn = cost
-        self.cost_batch = getattr(cost, "batch", None) if cost is not None else None
-        self.batch_calls = 0
-        self.batch_states = 0
-        self.cost_evals = 0
-
-    def state(self, q: np.ndarray) -> bool:
-        """Validity of one configuration within bounds (the user's check, called directly)."""
-        if not self.space.in_bounds(q):
-            return False
-        self.batch_states += 1
-        return bool(self.is_valid(q))
-
-    def motion(self, qa: np.ndarray, qb: np.ndarray) -> bool:
-        """The straight segment ``qa -> qb`` (end points assumed valid) at the space's resolution."""
-        if self.valid_batch is None:
-            return self.space.check_motion(qa, qb)
-        return self.states(densify(np.stack([qa, qb]), self.space.resolution)[1:-1])
-
-    def states(self, qs: np.ndarray) -> bool:
-        """Every one of ``qs`` ``(n, dof)`` valid, in one batched call (``valid_batch`` must exist)."""
-        if len(qs) == 0:
-            return True
-        assert self.valid_batch is not None
-        self.batch_calls += 1
-        self.batch_states += len(qs)
-        return bool(np.all(np.asarray(self.valid_batch(qs), dtype=bool)))
-
-    def cost(self, q: np.ndarray) -> float:
-        if self.cost_fn is None:
-            return 0.0
-        self.cost_evals += 1
-        return float(self.cost_fn(q))
-
-    def costs(self, qs: np.ndarray) -> np.ndarray:
-        if self.cost_fn is None:
-            return np.zeros(len(qs))
-        self.cost_evals += len(qs)
-        if self.cost_batch is not None:
-            return np.asarray(self.cost_batch(qs), dtype=float).reshape(-1)
-        return np.array([float(self.cost_fn(q)) for q in qs])
 
 
 class TRRTPlanner(MotionPlanner):
@@ -273,7 +177,7 @@ class TRRTPlanner(MotionPlanner):
         space, q_start, q_goal, failed = check_query(start, goal, lower, upper, is_valid, cfg)
         if failed is not None:
             return failed
-        checks = _Checks(space, is_valid, cost)
+        checks = Checks(space, is_valid, cost)
         step = default_range(space, cfg, fraction=0.05)
         frontier_threshold = cfg.frontier_threshold if cfg.frontier_threshold is not None else step
         c_start, c_goal = checks.cost(q_start), checks.cost(q_goal)
@@ -285,17 +189,17 @@ class TRRTPlanner(MotionPlanner):
 
         seed_ompl(int(rng.integers(2**31 - 1)))
         draw = space.sampler()
-        trees = (_Tree(q_start, c_start, True), _Tree(q_goal, c_goal, False))
+        trees = (Tree(q_start, c_start, True), Tree(q_goal, c_goal, False))
         # K normalises cost rises so the temperature is dimensionless (Jaillet et al.: mean cost of the end points).
         k_norm = max(0.5 * (abs(c_start) + abs(c_goal)), 1e-12)
         transition = _Transition(cfg, k_norm, (c_start, c_goal), rng)
         counts = {"collision": 0, "transition": 0, "refinement": 0, "motion": 0}
         frontier = {"frontier": 0, "refinement": 0}
 
-        def extend(tree: _Tree, i_near: int, target: np.ndarray, d: float, explore: bool) -> tuple[_Grow, int]:
+        def extend(tree: Tree, i_near: int, target: np.ndarray, d: float, explore: bool) -> tuple[Grow, int]:
             """One step of at most ``step`` from node ``i_near`` towards ``target`` (``d`` away)."""
             if d < 1e-12:
-                return _Grow.REACHED, i_near
+                return Grow.REACHED, i_near
             q_near = tree.nodes[i_near]
             reach = d <= step
             q_new = target.copy() if reach else q_near + (target - q_near) * (step / d)
@@ -303,36 +207,36 @@ class TRRTPlanner(MotionPlanner):
             refine_quota = cfg.frontier_ratio * max(frontier["frontier"], 1)
             if explore and not is_frontier and frontier["refinement"] > refine_quota:
                 counts["refinement"] += 1
-                return _Grow.TRAPPED, i_near
+                return Grow.TRAPPED, i_near
             if not checks.state(q_new):
                 counts["collision"] += 1
-                return _Grow.TRAPPED, i_near
+                return Grow.TRAPPED, i_near
             c_new = checks.cost(q_new)
             if not transition(float(tree.costs[i_near]), c_new):
                 counts["transition"] += 1
-                return _Grow.TRAPPED, i_near
+                return Grow.TRAPPED, i_near
             # The goal tree's edges are travelled backwards; the discrete check is symmetric, so the order is moot.
             if not checks.motion(q_near, q_new):
                 counts["motion"] += 1
-                return _Grow.TRAPPED, i_near
+                return Grow.TRAPPED, i_near
             i_new = tree.add(q_new, i_near, c_new)
             transition.seen(c_new)
             if explore:
                 frontier["frontier" if is_frontier else "refinement"] += 1
-            return (_Grow.REACHED if reach else _Grow.ADVANCED), i_new
+            return (Grow.REACHED if reach else Grow.ADVANCED), i_new
 
-        def connect(tree: _Tree, target: np.ndarray) -> tuple[_Grow, int]:
+        def connect(tree: Tree, target: np.ndarray) -> tuple[Grow, int]:
             """Greedy steps of ``tree`` towards ``target``, each one subject to the transition test."""
             i, d = tree.nearest(target)
             while True:
                 grow, i = extend(tree, i, target, d, explore=False)
-                if grow is not _Grow.ADVANCED:
+                if grow is not Grow.ADVANCED:
                     return grow, i
                 d = float(np.linalg.norm(target - tree.nodes[i]))
 
         iteration = 0
         timed_out = False
-        joint: tuple[_Tree, int, _Tree, int] | None = None
+        joint: tuple[Tree, int, Tree, int] | None = None
         for iteration in range(1, cfg.max_iterations + 1):
             if time.perf_counter() - t0 > time_limit:
                 timed_out = True
@@ -341,10 +245,10 @@ class TRRTPlanner(MotionPlanner):
             q_rand = draw()
             i_near, d = grow_tree.nearest(q_rand)
             grow, i_new = extend(grow_tree, i_near, q_rand, d, explore=True)
-            if grow is _Grow.TRAPPED or i_new == i_near:
+            if grow is Grow.TRAPPED or i_new == i_near:
                 continue
             reached, j = connect(other, grow_tree.nodes[i_new])
-            if reached is _Grow.REACHED:
+            if reached is Grow.REACHED:
                 joint = (grow_tree, i_new, other, j)
                 break
 
@@ -375,7 +279,7 @@ class TRRTPlanner(MotionPlanner):
         return self._finish(space, checks, raw, cost, stats, t0, rng)
 
     @staticmethod
-    def _direct_ok(checks: _Checks, q_start: np.ndarray, q_goal: np.ndarray, ceiling: float) -> bool:
+    def _direct_ok(checks: Checks, q_start: np.ndarray, q_goal: np.ndarray, ceiling: float) -> bool:
         """The straight motion is valid and, with a cost, nowhere costlier than ``ceiling`` (checked at resolution).
 
         With batched checks, every 8th state first, validity then cost, then the others: most straight
@@ -394,7 +298,7 @@ class TRRTPlanner(MotionPlanner):
         return checks.states(line[first]) and below(line[first]) and checks.states(line[~first]) and below(line[~first])
 
     @staticmethod
-    def _check_stats(space: JointSpace, checks: _Checks) -> dict[str, int]:
+    def _check_stats(space: JointSpace, checks: Checks) -> dict[str, int]:
         return {
             "validity_checks": space.n_checks + checks.batch_states,
             "batch_calls": checks.batch_calls,
@@ -404,7 +308,7 @@ class TRRTPlanner(MotionPlanner):
     def _finish(
         self,
         space: JointSpace,
-        checks: _Checks,
+        checks: Checks,
         raw: np.ndarray,
         cost: Callable[[np.ndarray], float] | None,
         stats: dict[str, Any],

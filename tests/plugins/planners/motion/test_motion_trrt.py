@@ -121,7 +121,7 @@ def test_direct_check_batched_agrees_with_every_state_and_stops_at_the_coarse_on
     """The straight-motion test, batched (every 8th state first, validity then cost): the verdict of checking
     every state at the resolution, on lines that are free, blocked, or climb the cost map between free ends."""
     from asmteach.plugins.planners.motion.space import JointSpace
-    from asmteach.plugins.planners.motion.trrt import _Checks
+    from asmteach.plugins.planners.motion.tree import Checks
 
     world = JointWorld(-np.pi * np.ones(2), np.pi * np.ones(2), [Box(np.array([0.0, 1.5]), np.array([0.3, 0.3]))])
     checks = vectorised(world)
@@ -139,7 +139,7 @@ def test_direct_check_batched_agrees_with_every_state_and_stops_at_the_coarse_on
         line = densify(np.stack([a, b]), 0.01)[1:-1]
         expected = bool(np.all(world.valid_batch(line)) and np.max(cost.batch(line), initial=0.0) <= ceiling)
         sizes.clear()
-        got = TRRTPlanner._direct_ok(_Checks(space, valid, cost), a, b, ceiling)
+        got = TRRTPlanner._direct_ok(Checks(space, valid, cost), a, b, ceiling)
         assert got == expected
         verdicts.add((got, bool(np.all(world.valid_batch(line)))))
         if not np.all(world.valid_batch(line[::8])):
