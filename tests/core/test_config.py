@@ -178,6 +178,8 @@ EXPERIMENT_TYPOS = [
      "params.planner.muu: unknown key"),
     ("experiment: reachability\nparams: {robot_settings: {table_hieght: 0.1}}\n",
      "params.robot_settings.table_hieght: unknown key"),
+    (f"experiment: assembly_planning\nparams: {{structure: {PEG}, motion_settings: {{rang: 0.1}}}}\n",
+     "params.motion_settings.rang: unknown key"),
 ]  # fmt: skip
 
 

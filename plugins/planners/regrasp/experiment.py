@@ -21,7 +21,7 @@ import numpy as np
 from pydantic import Field
 
 from asmteach.core import registry
-from asmteach.core.config import SceneSettings
+from asmteach.core.config import SceneSettings, check_plugin_settings
 from asmteach.core.interfaces import AssemblyProblem
 from asmteach.core.models import StrictModel, TablePlane
 from asmteach.core.parts import build_part, load_structure
@@ -47,6 +47,21 @@ class AssemblyPlanningExperiment(Experiment):
 
     Params = AssemblyPlanningParams
     plot_metrics = ("success", "recheck_ok", "seconds", "motion_seconds", "regrasps", "path_length", "min_clearance_mm")
+
+    def check(self, params: AssemblyPlanningParams) -> None:
+        """The robot's, motion planner's and assembly planner's settings by their plugins' models, before any trial."""
+        for role, name, key in (
+            ("robots", "nextage_pybullet", "robot"),
+            ("motion_planners", params.motion_planner, "motion"),
+            ("assembly_planners", "regrasp", "planner"),
+        ):
+            check_plugin_settings(
+                role,
+                name,
+                getattr(params, f"{key}_settings"),
+                name_key="params.motion_planner",
+                settings_key=f"params.{key}_settings",
+            )
 
     def run_trial(self, params: AssemblyPlanningParams, seed: int, workdir: Path) -> dict[str, Any]:
         task = load_structure(self.path(params.structure))
