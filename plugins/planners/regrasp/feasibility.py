@@ -154,8 +154,9 @@ def evaluate_slots(
     other slots where it passes the screen (grasps usable at more slots are
     tried first, since only shared grasps make edges). ``seeds`` holds one IK
     seed per arm. All targets of an arm go to :meth:`Robot.ik_many` at once.
-    Solutions are keyed by ``(variant_id, arm)``; rejections keep their
-    reason, keyed the same way with ``arm = ""`` for grasps screened out before IK.
+    Solutions are keyed by ``(variant_id, arm)``; rejections are a
+    :class:`~.graph.Rejection` each, keyed the same way with ``arm = ""`` for
+    grasps screened out before IK.
     """
     first = set(prefer)
     out: list[GraspFeasibility] = []

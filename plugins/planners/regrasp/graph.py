@@ -181,8 +181,9 @@ def _joint_distance(qa: np.ndarray, qb: np.ndarray) -> float:
 def search_keyframes(G: nx.Graph, *, banned_edges: Iterable[tuple[Node, Node]] = ()) -> KeyframeSearch:
     """Cheapest START -> GOAL path, ignoring ``banned_edges`` (motions that failed).
 
-    The reason of a failure says which layer is cut off: no feasible grasp at
-    the start, none at the goal, or no grasp shared between the layers.
+    A failure says which layer is cut off (``cut``, and in its reason): no
+    feasible grasp at the start, none at the goal, or no grasp shared between
+    the layers (then ``components`` counts the unconnected groups of grasps).
     """
     banned = {frozenset(e) for e in banned_edges}
     view = nx.subgraph_view(G, filter_edge=lambda a, b: frozenset((a, b)) not in banned)
