@@ -259,7 +259,8 @@ class MotionPlanner(Plugin):
 # ---------------------------------------------------------------- robot
 @dataclass
 class IKResult:
-    """Inverse kinematics outcome. ``residual_*`` are the final errors."""
+    """Inverse kinematics outcome: ``q`` ``(dof,)`` radians when solved; ``residual_pos`` (metres) and
+    ``residual_rot`` (radians) are the final TCP errors; ``reason`` says why it failed."""
 
     success: bool
     q: np.ndarray | None
@@ -272,7 +273,7 @@ class IKResult:
 
 @dataclass
 class Obstacle:
-    """A static collision object of the world: a mesh at a world pose."""
+    """A static collision object of the world: ``mesh`` (metres, its own frame) at ``T_world`` ``(4, 4)``."""
 
     name: str
     mesh: trimesh.Trimesh
