@@ -132,3 +132,12 @@ def test_world_members_are_declared_and_the_optional_ones_say_so() -> None:
         Blind().sense_rgb()
     with pytest.raises(NotImplementedError, match="camera pose"):
         Blind().camera_pose()
+
+
+def test_a_run_refuses_a_robot_without_a_world_in_one_line(toy_config, tmp_path, capsys) -> None:
+    from asmteach.core.cli import main
+
+    assert main(["run", str(toy_config), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'toy_robot' plans but has no world to run in" in err[0], err
+    assert not (tmp_path / "out" / "report.json").exists()  # refused before the run starts
