@@ -20,7 +20,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, Field, ValidationError, field_validator
 
 from asmteach.core.errors import UserError
-from asmteach.core.interfaces import Plugin
+from asmteach.core.interfaces import Plugin, Teacher
 from asmteach.core.io import read_yaml
 from asmteach.core.models import StrictModel, resolve_relative
 
@@ -317,15 +317,15 @@ def check_plugin_settings(role: str, name: str, settings: dict[str, Any], *, nam
     validate_settings(cls, settings, where=settings_key)
 
 
-def validate_demo(teacher: type[Plugin], name: str, demo: dict[str, Any]) -> BaseModel | None:
+def validate_demo(teacher: type[Teacher], name: str, demo: dict[str, Any]) -> BaseModel | None:
     """The ``demo`` section validated by the teacher's ``DemoSettings`` model; None if the teacher has none.
 
     A teacher that renders demonstrations declares the model of their
-    settings as the class attribute ``DemoSettings`` (as it declares
-    ``Settings``); a ``demo`` section given to a teacher without one is an
-    error, not ignored.
+    settings as :attr:`Teacher.DemoSettings <asmteach.core.interfaces.Teacher.DemoSettings>`
+    (as it declares ``Settings``); a ``demo`` section given to a teacher
+    without one is an error, not ignored.
     """
-    model: type[BaseModel] | None = getattr(teacher, "DemoSettings", None)
+    model = teacher.DemoSettings
     if model is None:
         if demo:
             raise UserError(

@@ -110,6 +110,10 @@ class PartModel:
 class Teacher(Plugin):
     """Learns an :class:`AssemblyTask` from RGB frames of a human demonstration."""
 
+    DemoSettings: ClassVar[type[StrictModel] | None] = None
+    """The model of the run config's ``demo`` section, for a teacher that renders demonstrations
+    (:meth:`demonstrate`); ``None``: the teacher takes no ``demo`` section (one given is an error)."""
+
     @abc.abstractmethod
     def teach(
         self,
