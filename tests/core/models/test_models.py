@@ -24,7 +24,7 @@ def task(repo_root) -> m.AssemblyTask:
 def repo_root():
     from pathlib import Path
 
-    return Path(__file__).resolve().parents[2]
+    return Path(__file__).resolve().parents[3]
 
 
 def test_assembly_task_round_trip_keeps_poses(task):
