@@ -69,7 +69,12 @@ __all__ = ["TransferResult", "feasible_grasps_at", "plan_transfer"]
 
 @dataclass
 class TransferResult:
-    """Outcome of moving one part."""
+    """Outcome of moving one part.
+
+    ``keyframes``: the named arm configurations of a plan; ``layers``: on a
+    failed search, the counts of every grasp layer (:meth:`GraspFeasibility.counts`:
+    grasp variants tried, feasible, rejected by kind, of those with the table).
+    """
 
     success: bool
     steps: list[Step] = field(default_factory=list)
@@ -79,6 +84,7 @@ class TransferResult:
     stats: dict[str, Any] = field(default_factory=dict)
     q_end: dict[str, np.ndarray] = field(default_factory=dict)
     keyframes: list[dict[str, Any]] = field(default_factory=list)
+    layers: list[dict[str, Any]] = field(default_factory=list)
 
 
 def _screen_settings(settings: AssemblySettings) -> ScreenSettings:
@@ -271,7 +277,7 @@ def plan_transfer(
                 graph=G,
                 reason=f"{reason}; {_time_spent(stats, t0)}",
                 stats=_rounded(stats),
-                keyframes=[f.counts() for f in layers],
+                layers=[f.counts() for f in layers],
             )
         attempts += 1
         tm = time.perf_counter()

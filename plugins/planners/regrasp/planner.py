@@ -261,7 +261,7 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         result.failed_at = who
         if not keep_plan:
             result.plan = Plan(stats={"planning_seconds": round(time.perf_counter() - t0, 3)})
-        result.details["why_layers"] = res.keyframes
+        result.details["why_layers"] = res.layers
         return result
 
     def write_figures(self, result: AssemblyResult, out_dir: Path) -> dict[str, Path]:

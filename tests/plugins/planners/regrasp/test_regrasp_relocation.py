@@ -254,5 +254,5 @@ def test_a_goal_no_grasp_reaches_says_how_many_fail_and_why(peg) -> None:
         "no grasp is feasible at the goal pose (IK or collision): of 3 grasp variants at goal, 3 no IK " in res.reason
     )
     assert " s spent: " in res.reason and " s on motions" in res.reason
-    goal = next(c for c in res.keyframes if c["slot"] == "goal")
+    goal = next(c for c in res.layers if c["slot"] == "goal")
     assert goal == {"slot": "goal", "candidates": 3, "feasible": 0, "rejected": {"no IK solution": 3}, "with_table": {}}
