@@ -81,7 +81,7 @@ def test_overrides_apply_dotted_keys(toy_config):
 
 
 # ---------------------------------------------------------------- a misspelt key in every section
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 DEMO = REPO / "configs/demo.yaml"
 SECTIONS = [
     "", "table", "execution", "execution.scene", "demo",
