@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import trimesh
@@ -90,6 +91,7 @@ class ArmRobot(Robot, World):
         self._sim: PyBulletWorld | None = None
         self._table = TablePlane(height=self.settings.table_height)
         self._world_q: dict[str, np.ndarray] = {}  # arm -> joints in the world (radians)
+        self._depth_cam: Any = None  # the virtual Kinect, made on the first sense_depth (open3d loads then)
 
     def _setup(
         self,
@@ -378,7 +380,7 @@ class ArmRobot(Robot, World):
         """
         from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
 
-        if not hasattr(self, "_depth_cam"):
+        if self._depth_cam is None:
             self._depth_cam = DepthCamera(KinectSettings(), seed=self.seed)
         meshes = self._scene_meshes()
         frame = self._depth_cam.render(meshes, self.camera_pose())
