@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from asmteach.core.arm.kinematics import rotation_error
+from asmteach.core import geometry
 from asmteach.plugins.robots.nextage.robot import NextagePyBullet
 
 
@@ -43,11 +43,13 @@ def main() -> None:
                 ok += 1
                 T2 = robot.fk(arm, res.q)
                 pos.append(np.linalg.norm(T2[:3, 3] - T[:3, 3]))
-                rot.append(rotation_error(T2, T))
+                rot.append(geometry.rotation_distance(T2, T))
         t = np.asarray(times) * 1000.0
-        print(f"{arm} arm ({len(lo)} DOF), {len(qs)} reachable targets: success {100.0 * ok / len(qs):.2f} %, "
-              f"position error max {1000 * max(pos):.4f} mm, orientation error max {math.degrees(max(rot)):.4f} deg, "
-              f"time median {np.median(t):.2f} ms, mean {np.mean(t):.2f} ms, p95 {np.percentile(t, 95):.2f} ms")
+        print(
+            f"{arm} arm ({len(lo)} DOF), {len(qs)} reachable targets: success {100.0 * ok / len(qs):.2f} %, "
+            f"position error max {1000 * max(pos):.4f} mm, orientation error max {math.degrees(max(rot)):.4f} deg, "
+            f"time median {np.median(t):.2f} ms, mean {np.mean(t):.2f} ms, p95 {np.percentile(t, 95):.2f} ms"
+        )
     robot.close()
 
 

@@ -30,7 +30,7 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import IKResult
 from asmteach.core.models import StrictModel
 
-__all__ = ["ArmChain", "IKSettings", "Kinematics", "flip_jaw", "rotation_error"]
+__all__ = ["ArmChain", "IKSettings", "Kinematics", "flip_jaw"]
 
 FLIP_Z = np.diag([-1.0, -1.0, 1.0, 1.0])
 """TCP rotated 180 deg about its z (approach) axis: the other finger order of a symmetric jaw."""
@@ -39,12 +39,6 @@ FLIP_Z = np.diag([-1.0, -1.0, 1.0, 1.0])
 def flip_jaw(T_world_tcp: np.ndarray) -> np.ndarray:
     """The same grasp with the fingers swapped: ``T @ Rz(pi)``."""
     return np.asarray(T_world_tcp, dtype=float) @ FLIP_Z
-
-
-def rotation_error(A: np.ndarray, B: np.ndarray) -> float:
-    """Angle (radians) of the rotation between the rotation blocks of two poses."""
-    R = A[:3, :3].T @ B[:3, :3]
-    return float(math.acos(max(-1.0, min(1.0, 0.5 * (np.trace(R) - 1.0)))))
 
 
 class IKSettings(StrictModel):

@@ -25,8 +25,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field
 
-from asmteach.core import registry
-from asmteach.core.arm.kinematics import rotation_error
+from asmteach.core import geometry, registry
 from asmteach.core.config import check_plugin_settings
 from asmteach.core.io import atomic_path, write_text
 from asmteach.core.models import StrictModel
@@ -72,8 +71,9 @@ class Reachability(Experiment):
 
     def check(self, params: ReachabilityParams) -> None:
         """The robot plugin and its settings, before any trial."""
-        check_plugin_settings("robots", params.robot, params.robot_settings, name_key="params.robot",
-                              settings_key="params.robot_settings")
+        check_plugin_settings(
+            "robots", params.robot, params.robot_settings, name_key="params.robot", settings_key="params.robot_settings"
+        )
 
     def run_trial(self, params: ReachabilityParams, seed: int, workdir: Path) -> dict[str, Any]:
         robot = registry.create("robots", params.robot, params.robot_settings, seed=seed)
@@ -106,7 +106,7 @@ class Reachability(Experiment):
                     T_fk = robot.fk(params.arm, res.q)
                     target = T @ np.diag([-1.0, -1.0, 1.0, 1.0]) if res.flipped else T
                     pos_err.append(float(np.linalg.norm(T_fk[:3, 3] - target[:3, 3])))
-                    rot_err.append(rotation_error(T_fk, target))
+                    rot_err.append(geometry.rotation_distance(T_fk, target))
                     if not bool(robot.in_collision(params.arm, res.q[None])[0]):
                         n_ok += 1
                         feasible += 1

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from asmteach.core.arm.kinematics import flip_jaw, rotation_error
+from asmteach.core import geometry
+from asmteach.core.arm.kinematics import flip_jaw
 from asmteach.core.errors import UserError
 from asmteach.plugins.robots.nextage.robot import NextagePyBullet
 
@@ -31,7 +32,7 @@ def test_ik_round_trips(robot: NextagePyBullet, arm: str) -> None:
             solved += 1
             T2 = robot.fk(arm, res.q)
             assert np.linalg.norm(T2[:3, 3] - T[:3, 3]) < 1e-4
-            assert rotation_error(T2, T) < math.radians(0.1)
+            assert geometry.rotation_distance(T2, T) < math.radians(0.1)
             assert np.all(res.q >= lo - 1e-12) and np.all(res.q <= hi + 1e-12)
     assert solved >= 38
 
