@@ -41,6 +41,7 @@ import csv
 import importlib.util
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -84,12 +85,19 @@ def step_ms(timing: dict[str, float], keys: tuple[str, ...]) -> float:
 
 
 def run_ref(binary: str, db: Path, scene: Path, model: Path) -> dict:
-    """``pcl_ref detect`` on one scene: its JSON (``ok`` false and empty timing when it fails)."""
+    """``pcl_ref detect`` on one scene: its JSON (``ok`` false and empty timing when it fails).
+
+    ``cpu_ms`` is the CPU time of the whole process (user + system, file loading included: an upper bound on its
+    detection's).
+    """
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     p = subprocess.run([binary, "detect", "--db", str(db), "--scene", str(scene), "--model", str(model)],
                        capture_output=True, text=True, check=False)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu_ms = 1000.0 * (after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
     if p.returncode not in (0, 2):
-        return {"ok": False, "timing_ms": {}, "error": p.stderr.strip()[-200:]}
-    return json.loads(p.stdout)
+        return {"ok": False, "timing_ms": {}, "cpu_ms": cpu_ms, "error": p.stderr.strip()[-200:]}
+    return {**json.loads(p.stdout), "cpu_ms": cpu_ms}
 
 
 def main() -> None:
@@ -161,11 +169,13 @@ def main() -> None:
                     if who == "ours":
                         det = detector.detect(scene.cloud, part, viewpoint=T_cam[:3, 3])
                         got["ours"] = {"timing": det.timing_ms, "pose": det.rough if det.found else None,
-                                       "found": det.found}
+                                       "found": det.found, "cpu_ms": det.timing_ms.get("cpu", 0.0),
+                                       "icp_passes": det.details.get("icp_passes")}
                     else:
                         r = run_ref(args.pcl_ref, db, pcd, model_pcd)
                         pose = T_cam @ np.asarray(r["pose"], float) if r.get("ok") else None
-                        got["ref"] = {"timing": r.get("timing_ms", {}), "pose": pose, "found": bool(r.get("ok"))}
+                        got["ref"] = {"timing": r.get("timing_ms", {}), "pose": pose, "found": bool(r.get("ok")),
+                                      "cpu_ms": r["cpu_ms"], "icp_passes": None}
                 row: dict = {"part": cp.name, "family": cp.family, "scene": i, "rest": k,
                              "part_points": int((scene.frame.labels == 1).sum()), "load1": round(load, 2)}
                 for who, g in got.items():
@@ -176,7 +186,8 @@ def main() -> None:
                     row.update({f"{who}_found": g["found"], f"{who}_success": ok,
                                 f"{who}_wrong": g["found"] and not ok,
                                 f"{who}_pos_mm": None if mm is None else round(mm, 2),
-                                f"{who}_rot_deg": None if deg is None else round(deg, 2)})
+                                f"{who}_rot_deg": None if deg is None else round(deg, 2),
+                                f"{who}_cpu_ms": round(g["cpu_ms"], 1), f"{who}_icp_passes": g["icp_passes"]})
                     for step, (ref_keys, our_keys) in STEPS.items():
                         keys = our_keys if who == "ours" else ref_keys
                         row[f"{who}_{step}_ms"] = round(step_ms(g["timing"], keys), 2)
@@ -202,6 +213,10 @@ def main() -> None:
         print(f"{step:14s} {a:9.1f} {b:9.1f} {ratio}")
     paired = float(np.median([r["ours_total_ms"] / r["ref_total_ms"] for r in rows if r["ref_total_ms"] > 0]))
     print(f"median of the per-scene total ratios: {paired:.2f}")
+    a, b = (float(np.median([r[f"{who}_cpu_ms"] for r in rows])) for who in ("ours", "ref"))
+    print(f"CPU time, median: ours {a:.1f} ms (detect), PCL {b:.1f} ms (whole process, file loading included)")
+    print(f"ICP passes per scene (ours): median {np.median([r['ours_icp_passes'] for r in rows]):.0f}, "
+          f"mean {np.mean([r['ours_icp_passes'] for r in rows]):.1f}")
     for who in ("ours", "ref"):
         print(f"{who:4s}: success {sum(r[f'{who}_success'] for r in rows)}/{n}, "
               f"found {sum(r[f'{who}_found'] for r in rows)}, "

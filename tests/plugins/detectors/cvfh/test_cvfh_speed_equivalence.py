@@ -1,7 +1,11 @@
-"""The speed-ups of issue 27 change no result: the pruned ray tree of ``surface_check`` and the batched
-distance query of the pre-score give exactly what the unpruned / one-pose-at-a-time computations give."""
+"""The speed-ups of issue 27 change no result: the pruned ray tree of ``surface_check``, the batched
+distance query of the pre-score and its k-d tree bounds give exactly what the unpruned / one-pose-at-a-time /
+ray-casting computations give; a verification rejected before its surface check says what it said with it; the
+near-twin screen finds the pose the full near-twin pass finds."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import open3d as o3d
@@ -10,9 +14,17 @@ from scipy.spatial import cKDTree
 
 from asmteach.core import geometry
 from asmteach.core.corpus import corpus_part
+from asmteach.core.parts import PartSpec, build_part
 from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
-from asmteach.core.perception.registration import ModelCloud, RefineSettings, model_cloud, ray_depths, surface_check
-from asmteach.plugins.detectors.cvfh.detector import _near_shares
+from asmteach.core.perception.registration import (
+    ModelCloud,
+    RefineSettings,
+    model_cloud,
+    ray_depths,
+    surface_check,
+    verify,
+)
+from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector, _near_shares, _Samples
 from asmteach.plugins.detectors.cvfh.scenes import DEFAULT_EYE, default_camera_pose, place_on_table, render_table_scene
 
 
@@ -88,3 +100,62 @@ def test_batched_near_shares_equal_one_query_per_pose(scene_and_model) -> None: 
         one_by_one.append(float(np.mean(d < 0.004)))
     assert _near_shares(Ts, points, model, 0.004).tolist() == one_by_one
     assert len(_near_shares([], points, model, 0.004)) == 0
+
+
+@pytest.mark.parametrize("dist", [0.004, 0.012])
+def test_the_sample_tree_bounds_give_the_shares_of_the_exact_distances(scene_and_model, dist: float) -> None:  # type: ignore[no-untyped-def]
+    scene, model = scene_and_model
+    points = scene.cloud[scene.frame.labels == 1][::3]
+    rng = np.random.default_rng(1)
+    # Poses from right to far off: every point class (near a sample, in the band, beyond it) occurs.
+    Ts = [scene.T_world_part @ geometry.from_rotvec(rng.normal(scale=s, size=3)) for s in (0.0, 0.05, 0.3, 1.0)]
+    Ts += [geometry.compose(geometry.from_rotation(np.eye(3), rng.normal(scale=0.01, size=3)), T) for T in Ts]
+    samples = _Samples.of(model)
+    assert 0.0 < samples.cover < 0.01
+    exact = _near_shares(Ts, points, model, dist)
+    assert 0.0 < exact.min() < exact.max() == 1.0
+    assert _near_shares(Ts, points, model, dist, samples).tolist() == exact.tolist()
+
+
+def test_a_verification_rejected_before_the_surface_check_keeps_its_verdict_and_score(scene_and_model) -> None:  # type: ignore[no-untyped-def]
+    scene, model = scene_and_model
+    s = RefineSettings()
+    cluster = scene.cloud[scene.frame.labels == 1]
+    context = scene.cloud[np.linalg.norm(scene.cloud - cluster.mean(axis=0), axis=1) < 0.1]
+    T_off = scene.T_world_part @ geometry.from_rotvec([0.0, 0.0, 0.4])
+    got = verify(T_off, cluster, context, DEFAULT_EYE, model, s, scene.table)
+    assert not got.accepted and got.why.startswith("fitness") and np.isnan(got.coverage)
+    # With no fitness, RMSE and free-space thresholds the same pose goes on to the surface check, and fitness
+    # and violation (the score) are the ones computed before.
+    loose = s.model_copy(update={"min_fitness": 0.0, "max_rmse": 1.0, "max_violation": 1.0})
+    full = verify(T_off, cluster, context, DEFAULT_EYE, model, loose, scene.table)
+    assert np.isfinite(full.coverage) and (full.fitness, full.violation) == (got.fitness, got.violation)
+    right = verify(scene.T_world_part, cluster, context, DEFAULT_EYE, model, s, scene.table)
+    assert right.accepted and np.isfinite(right.coverage)
+
+
+@pytest.mark.slow
+def test_the_near_twin_screen_finds_the_pose_of_the_full_pass(tmp_path: Path) -> None:
+    # A prism with a hole: four near twins (turns the hole side hides) and six nudges, most of which fall back
+    # onto the found pose; the screen skips their full ICP, and fewer ICP passes find the same pose.
+    import trimesh
+
+    mesh = corpus_part("prism_hole_0").mesh
+    mesh.export(tmp_path / "prism.stl")
+    part = build_part(PartSpec(name="prism", mesh=str(tmp_path / "prism.stl"), mesh_units="m"))
+    T, p = trimesh.poses.compute_stable_poses(mesh, center_mass=np.asarray(mesh.center_mass))
+    got = {}
+    for k in (0, 10):
+        det = CvfhIcpDetector({"near_screen_iterations": k}, seed=0)
+        runs = []
+        for i, yaw in enumerate((0.3, 1.9)):
+            T_true = place_on_table(mesh, T[int(np.argmax(p))], yaw, (0.47, 0.03))
+            camera = DepthCamera(KinectSettings(), seed=i)
+            sc = render_table_scene(camera, mesh, T_true, T_world_cam=default_camera_pose())
+            runs.append(det.detect(sc.cloud, part, viewpoint=DEFAULT_EYE))
+        got[k] = runs
+    for full, screened in zip(got[0], got[10], strict=True):
+        assert full.found == screened.found and full.reason == screened.reason
+        if full.found:
+            assert np.allclose(full.rough, screened.rough, atol=1e-9)
+        assert screened.details["icp_passes"] < full.details["icp_passes"]
