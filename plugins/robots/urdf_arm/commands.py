@@ -71,7 +71,7 @@ def _cmd_robot_check(args: argparse.Namespace) -> int:
 def asmteach_add_commands(subparsers: argparse._SubParsersAction) -> None:
     """Add ``robot-check``."""
     p = subparsers.add_parser("robot-check", help="check a URDF: parse, load in pinocchio and PyBullet, compare FK")
-    p.add_argument("urdf", help="URDF file, or pybullet_data:<relative path>")
+    p.add_argument("urdf", help="URDF file, pybullet_data:<relative path> or example-robot-data:<relative path>")
     p.add_argument("--joints", default=None, help="comma-separated arm joints, base to tip")
     p.add_argument("--tcp", default=None, help="TCP link of the arm")
     p.add_argument("--samples", type=int, default=50, help="random configurations to compare")
