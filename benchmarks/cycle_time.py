@@ -39,6 +39,7 @@ import numpy as np
 from asmteach.core import pipeline
 from asmteach.core.config import load_run_config
 from asmteach.core.errors import UserError
+from asmteach.core.pipeline import run as pipeline_run
 from asmteach.plugins.planners.regrasp import planner as regrasp_planner
 from asmteach.plugins.planners.regrasp.plan_io import KINDS, to_plan
 
@@ -93,15 +94,15 @@ def _plan_only(*_: Any, **__: Any) -> Any:
 def run_seed(config: Path, seed: int, out: Path, execute: bool, go_on: str = "toppra") -> dict[str, Any]:
     """One seed: the pipeline with the pairing in place (``go_on``: the timing executed); returns the row."""
     pairing = _Pairing(go_on)
-    original_to_plan, original_execute = regrasp_planner.to_plan, pipeline._execute
+    original_to_plan, original_execute = regrasp_planner.to_plan, pipeline_run.execute_stage
     regrasp_planner.to_plan = pairing
     if not execute:
-        pipeline._execute = _plan_only
+        pipeline_run.execute_stage = _plan_only
     try:
         cfg = load_run_config(config, overrides={"seed": seed, "execution.animation": False})
         report = pipeline.run_pipeline(cfg, out / f"seed_{seed}")
     finally:
-        regrasp_planner.to_plan, pipeline._execute = original_to_plan, original_execute
+        regrasp_planner.to_plan, pipeline_run.execute_stage = original_to_plan, original_execute
     row: dict[str, Any] = {"seed": seed, "executed": execute, "go_on": go_on, "success": bool(report.success),
                            "failed_stage": report.failed_stage or "", "reason": (report.reason or "")[:160],
                            "computer_s": dict(report.computer_seconds), "robot_executed": dict(report.robot_seconds),

@@ -11,6 +11,7 @@ import yaml
 from asmteach.core import pipeline
 from asmteach.core.end_to_end import EndToEnd
 from asmteach.core.models import PlanSegment, RunReport, StageOutcome, Trajectory
+from asmteach.core.pipeline import execute as pipeline_execute
 from asmteach.core.report_html import format_summary, render_report_html
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -37,9 +38,9 @@ def _report(**kw) -> RunReport:
 def test_executed_segments_add_to_the_robot_clock_by_kind() -> None:
     report = RunReport(config={}, seed=0)
     traj = Trajectory(arm="left", joint_names=["j"], times=[0.0, 0.5, 1.25], positions=np.zeros((3, 1)))
-    pipeline._count_robot_seconds(report, PlanSegment(label="carry", trajectory=traj, kind="transit"))
-    pipeline._count_robot_seconds(report, PlanSegment(label="insert", trajectory=traj, kind="insertion"))
-    pipeline._count_robot_seconds(report, PlanSegment(label="x", trajectory=traj))
+    pipeline_execute._count_robot_seconds(report, PlanSegment(label="carry", trajectory=traj, kind="transit"))
+    pipeline_execute._count_robot_seconds(report, PlanSegment(label="insert", trajectory=traj, kind="insertion"))
+    pipeline_execute._count_robot_seconds(report, PlanSegment(label="x", trajectory=traj))
     assert report.robot_seconds == {"total": 3.75, "transit": 1.25, "insertion": 1.25, "unlabelled": 1.25}
     back = RunReport.model_validate_json(report.model_dump_json())
     assert back.robot_seconds == report.robot_seconds

@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 # (failed stage, reason as report.json states it, cause): reasons copied from real runs' reports (the smoke runs
 # of docs/results/structures_corpus.md, the cycle-time bench, the bad-input tests) and from the planner's own
-# phrasing (plugins/planners/regrasp, core/pipeline.py) where no run at hand failed that way.
+# phrasing (plugins/planners/regrasp, core/pipeline/) where no run at hand failed that way.
 REAL_REASONS = [
     ("detect", "hex_peg not found: 'hex_peg' not found: best hypothesis rejected (ambiguous: a pose 0 mm and 9 deg "
      "away explains the view as well (score 0.963 vs 0.964); the part is nearly symmetric and this view misses the "

@@ -12,7 +12,7 @@ from asmteach.core.config import SceneSettings
 from asmteach.core.parts import build_part, load_structure
 from asmteach.core.scene import random_start_poses
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 STRUCTURE = ROOT / "configs/parts/set1/peg_in_hole.yaml"
 
 
@@ -62,8 +62,11 @@ def test_nearest_symmetric_pose_is_the_twin_closest_to_the_reference() -> None:
     assert pose_error(seen, T_ref).angle_deg > 90.0
     near = nearest_symmetric(seen, T_ref, syms)
     assert pose_error(near, T_ref).angle_deg == pytest.approx(0.5, abs=1e-6)
-    np.testing.assert_allclose(geometry.transform_points(near, peg.mesh.vertices).mean(0),
-                               geometry.transform_points(seen, peg.mesh.vertices).mean(0), atol=1e-9)
+    np.testing.assert_allclose(
+        geometry.transform_points(near, peg.mesh.vertices).mean(0),
+        geometry.transform_points(seen, peg.mesh.vertices).mean(0),
+        atol=1e-9,
+    )
 
 
 def test_random_start_poses_rest_on_the_table_apart_and_are_seeded() -> None:
@@ -87,9 +90,12 @@ def test_whole_run_goes_through_every_stage_and_writes_its_report(tmp_path: Path
     Whether the parts end assembled is measured (metrics, exit code) but not
     asserted here: the end-to-end success rate is an experiment, not a unit test.
     """
-    cfg = _config(tmp_path, motion_planner={"plugin": "trrt"},
-                  robot={"plugin": "nextage_pybullet", "settings": {"ik": {"max_starts": 4}, "start_tolerance": 0.06}},
-                  execution={"animation_fps": 1.0})
+    cfg = _config(
+        tmp_path,
+        motion_planner={"plugin": "trrt"},
+        robot={"plugin": "nextage_pybullet", "settings": {"ik": {"max_starts": 4}, "start_tolerance": 0.06}},
+        execution={"animation_fps": 1.0},
+    )
     out = tmp_path / "out"
     code = main(["run", str(cfg), "--out", str(out)])
     report = json.loads((out / "report.json").read_text())
@@ -118,8 +124,20 @@ def test_an_ambiguous_block_is_looked_at_again_once_placed_and_the_assembly_plan
     """
     out = tmp_path / "out"
     # one depth frame, as when this scene was found: with four, the detector happens to pick the right twin
-    main(["run", str(ROOT / "configs/demo.yaml"), "--out", str(out), "--set", "seed=12",
-          "--set", "execution.animation=false", "--set", "execution.depth_frames=1"])
+    main(
+        [
+            "run",
+            str(ROOT / "configs/demo.yaml"),
+            "--out",
+            str(out),
+            "--set",
+            "seed=12",
+            "--set",
+            "execution.animation=false",
+            "--set",
+            "execution.depth_frames=1",
+        ]
+    )
     report = json.loads((out / "report.json").read_text())
     block = next(d for d in report["detections"] if d["part"] == "holed_block")
     assert block["details"]["ambiguous"]
@@ -137,8 +155,20 @@ def test_a_block_put_down_a_millimetre_off_is_seen_and_the_peg_aimed_at_it(tmp_p
     twice the hole's radial clearance. Seen there, the peg's insertion is planned again into it (issue 9's jam)."""
     out = tmp_path / "out"
     # one depth frame, as when this scene was found: with four, the yaw is detected well enough
-    main(["run", str(ROOT / "configs/demo.yaml"), "--out", str(out), "--set", "seed=38",
-          "--set", "execution.animation=false", "--set", "execution.depth_frames=1"])
+    main(
+        [
+            "run",
+            str(ROOT / "configs/demo.yaml"),
+            "--out",
+            str(out),
+            "--set",
+            "seed=38",
+            "--set",
+            "execution.animation=false",
+            "--set",
+            "execution.depth_frames=1",
+        ]
+    )
     report = json.loads((out / "report.json").read_text())
     look = next(s for s in report["stages"] if s["stage"] == "look_again")["details"]
     assert look["a_true_vs_goal"]["position_mm"] > 0.8  # A really is off (the simulator's truth)
@@ -151,7 +181,7 @@ def test_a_block_put_down_a_millimetre_off_is_seen_and_the_peg_aimed_at_it(tmp_p
 
 def test_a_look_stacks_the_clouds_of_several_depth_frames() -> None:
     from asmteach.core.config import ExecutionSettings
-    from asmteach.core.pipeline import _sense
+    from asmteach.core.pipeline.detect import sense
 
     class Camera:
         calls = 0
@@ -164,8 +194,8 @@ def test_a_look_stacks_the_clouds_of_several_depth_frames() -> None:
             return np.eye(4)
 
     cam = Camera()
-    depth, cloud, eye = _sense(cam, ExecutionSettings().depth_frames)
+    depth, cloud, eye = sense(cam, ExecutionSettings().depth_frames)
     assert cam.calls == 4 and cloud.shape == (40, 3)
     assert sorted(set(cloud[:, 0])) == [1.0, 2.0, 3.0, 4.0]  # every frame's own points
     assert np.all(depth == 1.0) and np.all(eye == 0.0)
-    assert _sense(Camera(), 1)[1].shape == (10, 3)
+    assert sense(Camera(), 1)[1].shape == (10, 3)
