@@ -8,7 +8,9 @@ Robot plugins build on it (the Nextage, ``urdf_arm``); it depends on the core on
 - :mod:`~asmteach.core.arm.kinematics`: URDF kinematics (FK, damped-least-squares IK);
 - :mod:`~asmteach.core.arm.batch_ik`: IK of many targets at once;
 - :mod:`~asmteach.core.arm.collision`: batch collision and clearance checks;
-- :mod:`~asmteach.core.arm.sim`: the PyBullet world and :class:`GripperJoints`;
+- :mod:`~asmteach.core.arm.sim`: the PyBullet world (robot, table, parts, trajectory execution);
+- :mod:`~asmteach.core.arm.sim_gripper`: :class:`GripperJoints` and gripping in that world;
+- :mod:`~asmteach.core.arm.sim_camera`: its RGB camera images;
 - :mod:`~asmteach.core.arm.plan_check`: the independent re-check of a plan;
 - :mod:`~asmteach.core.arm.urdf_check`: URDF parsing with errors that name the element.
 """

@@ -30,7 +30,9 @@ from asmteach.core.arm.kinematics import IKSettings, Kinematics
 from asmteach.core.arm.plan_check import CheckedArm, PlanCheck
 from asmteach.core.arm.plan_checker import recheck_plan
 from asmteach.core.arm.scene import ArmScene, SceneBinding
-from asmteach.core.arm.sim import POSITION_GAIN, GripperJoints, PyBulletWorld
+from asmteach.core.arm.sim import POSITION_GAIN, PyBulletWorld
+from asmteach.core.arm.sim_camera import render_rgb
+from asmteach.core.arm.sim_gripper import GripperJoints, grip
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import IKResult, Obstacle, PartModel, Robot
 from asmteach.core.models import HandSpec, Plan, StrictModel, TablePlane, Trajectory
@@ -277,7 +279,7 @@ class ArmRobot(Robot, World):
         g = self._arm(arm).gripper
         s = self.sim
         speed = max(abs(s.p.getJointInfo(s.robot, s.joint_index[g.finger_joints[0]])[11]), 0.05)
-        held = s.grip(arm, g, close, part, self.settings.grip_force, speed)
+        held = grip(s, arm, g, close, part, self.settings.grip_force, speed)
         if held and part is not None:
             T_tcp_part = np.linalg.solve(self.fk(arm, self.current(arm)), s.part_pose(part))
             # the jaw as wide as the fingers stand now (each finger joint is half the opening)
@@ -394,7 +396,7 @@ class ArmRobot(Robot, World):
         from asmteach.core.perception.depth_camera import KinectSettings
 
         k = KinectSettings()
-        return self.sim.rgb(self.camera_pose(), k.width, k.height, k.fx, k.fy, k.cx, k.cy)
+        return render_rgb(self.sim.p, self.camera_pose(), k.width, k.height, k.fx, k.fy, k.cx, k.cy)
 
     def close(self) -> None:
         if self._sim is not None:

@@ -25,7 +25,7 @@ from asmteach.core.robot import Attachment, PlanningScene
 if TYPE_CHECKING:
     from asmteach.core.arm.collision import CollisionChecker
     from asmteach.core.arm.kinematics import Kinematics
-    from asmteach.core.arm.sim import GripperJoints
+    from asmteach.core.arm.sim_gripper import GripperJoints
     from asmteach.core.interfaces import Obstacle
 
 __all__ = ["ArmScene", "SceneBinding"]

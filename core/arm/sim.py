@@ -1,4 +1,4 @@
-"""A PyBullet world for one robot: table, parts, trajectory execution, gripping, cameras.
+"""A PyBullet world for one robot: the robot, the table and parts, trajectory execution.
 
 One PyBullet client per instance (``bullet_client.BulletClient``), never the
 global one, so several robots can live in one process. Headless (DIRECT) by
@@ -12,6 +12,9 @@ from an OBJ file; the visual shape is always the exact mesh.
 Poses: ``T_world_part`` is the part frame (its mesh frame), not PyBullet's
 centre-of-mass frame; the conversion is done here. Units: metres, radians,
 seconds, newtons.
+
+Gripping (:mod:`~asmteach.core.arm.sim_gripper`) and camera images
+(:mod:`~asmteach.core.arm.sim_camera`) act on such a world from their own modules.
 """
 
 from __future__ import annotations
@@ -19,7 +22,6 @@ from __future__ import annotations
 import logging
 import os
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -31,20 +33,9 @@ from asmteach.core.convex_pieces import decompose
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
 
-__all__ = ["POSITION_GAIN", "GripperJoints", "PyBulletWorld"]
+__all__ = ["POSITION_GAIN", "PyBulletWorld", "pb_to_pose", "pose_to_pb"]
 
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class GripperJoints:
-    """A parallel gripper in the simulator: finger joints, their open/closed values and the TCP link."""
-
-    finger_joints: list[str]
-    open_values: list[float]
-    closed_values: list[float]
-    tcp_link: str
-    finger_links: list[str]
 
 
 CONTACT_MARGIN = 0.0
@@ -66,11 +57,13 @@ _EXACT_OBJ: dict[str, str] = {}
 """OBJ text of a parametric part's exact convex pieces, by part hash."""
 
 
-def _pose_to_pb(T: np.ndarray) -> tuple[list[float], list[float]]:
+def pose_to_pb(T: np.ndarray) -> tuple[list[float], list[float]]:
+    """``(position, quaternion x y z w)`` lists, as PyBullet takes them, of a ``(4, 4)`` pose."""
     return T[:3, 3].tolist(), geometry.to_quat(T).tolist()
 
 
-def _pb_to_pose(pos: tuple[float, ...], orn: tuple[float, ...]) -> np.ndarray:
+def pb_to_pose(pos: tuple[float, ...], orn: tuple[float, ...]) -> np.ndarray:
+    """The ``(4, 4)`` pose of a PyBullet position and quaternion (x, y, z, w)."""
     return geometry.from_quat(orn, pos)
 
 
@@ -83,7 +76,7 @@ class PyBulletWorld:
     gui : open PyBullet's window (needs a display; falls back to headless).
     time_step : physics step, seconds.
     position_gain : ``positionGain`` of the servos that hold and move the joints (see
-        :data:`POSITION_GAIN`); :meth:`grip` drives the fingers with PyBullet's default.
+        :data:`POSITION_GAIN`); :func:`~asmteach.core.arm.sim_gripper.grip` drives the fingers with PyBullet's default.
     """
 
     def __init__(
@@ -107,7 +100,7 @@ class PyBulletWorld:
         self.p.setTimeStep(self.time_step)
         self.p.setGravity(0.0, 0.0, -9.81)
         self.T_world_base = np.asarray(T_world_base, dtype=float)
-        pos, orn = _pose_to_pb(self.T_world_base)
+        pos, orn = pose_to_pb(self.T_world_base)
         flags = pybullet.URDF_USE_INERTIA_FROM_FILE
         try:
             self.robot = self.p.loadURDF(str(urdf), pos, orn, useFixedBase=True, flags=flags)
@@ -134,7 +127,7 @@ class PyBulletWorld:
         self.table_id: int | None = None
         self.parts: dict[str, tuple[int, PartModel]] = {}
         self.constraints: dict[str, tuple[int, str]] = {}  # arm -> (constraint id, part name)
-        self._gears: dict[str, int] = {}  # arm -> gear constraint coupling its fingers
+        self.gears: dict[str, int] = {}  # arm -> gear constraint coupling its fingers
         self._tmp = tempfile.TemporaryDirectory(prefix="asmteach-pb-")
         self._shape_files: dict[str, str] = {}
 
@@ -170,7 +163,7 @@ class PyBulletWorld:
         if idx < 0:
             return self.T_world_base.copy()  # the fixed base never moves
         st = self.p.getLinkState(self.robot, idx, computeForwardKinematics=True)
-        return _pb_to_pose(st[4], st[5])
+        return pb_to_pose(st[4], st[5])
 
     # ------------------------------------------------------------ world
     def reset_world(
@@ -227,7 +220,7 @@ class PyBulletWorld:
             indices=np.asarray(part.mesh.faces).reshape(-1).tolist(),
             rgbaColor=[*part.spec.color, 1.0],
         )
-        pos, orn = _pose_to_pb(T)
+        pos, orn = pose_to_pb(T)
         body = self.p.createMultiBody(
             part.mass, col, vis, pos, orn, baseInertialFramePosition=np.asarray(part.center_of_mass).tolist()
         )
@@ -248,7 +241,7 @@ class PyBulletWorld:
             raise UserError(f"no part named {name!r} in the simulated world (have {sorted(self.parts)})")
         body, part = self.parts[name]
         pos, orn = self.p.getBasePositionAndOrientation(body)
-        T_com = _pb_to_pose(pos, orn)  # PyBullet reports the centre-of-mass frame
+        T_com = pb_to_pose(pos, orn)  # PyBullet reports the centre-of-mass frame
         T_part_com = np.eye(4)
         T_part_com[:3, 3] = part.center_of_mass
         return T_com @ np.linalg.inv(T_part_com)
@@ -296,146 +289,6 @@ class PyBulletWorld:
                 break
             self.p.stepSimulation()
         return self.get_joints(names)
-
-    # ------------------------------------------------------------ gripper
-    def grip(
-        self,
-        arm: str,
-        g: GripperJoints,
-        close: bool,
-        part: str | None,
-        force: float,
-        speed: float,
-        max_time: float = 1.5,
-    ) -> bool:
-        """Close the fingers until they touch ``part`` (then weld it to the TCP) or open and release."""
-        ids = self.joint_ids(g.finger_joints)
-        if not close:
-            if arm in self.constraints:
-                cid, held = self.constraints.pop(arm)
-                self.p.removeConstraint(cid)
-                if held in self.parts:
-                    self._finger_contacts(g, self.parts[held][0], enable=True)
-            for j, v in zip(ids, g.open_values, strict=True):
-                self.p.setJointMotorControl2(
-                    self.robot, j, pybullet.POSITION_CONTROL, targetPosition=v, force=force, maxVelocity=speed
-                )
-            for _ in range(int(max_time / self.time_step)):
-                self.p.stepSimulation()
-                if np.allclose(self.get_joints(g.finger_joints), g.open_values, atol=1e-3):
-                    break
-            return False
-        body = None
-        if part is not None:
-            if part not in self.parts:
-                raise UserError(f"grip: no part named {part!r} in the simulated world (have {sorted(self.parts)})")
-            body = self.parts[part][0]
-        finger_idx = [self.link_index[ln] for ln in g.finger_links]
-        for j, v in zip(ids, g.closed_values, strict=True):
-            self.p.setJointMotorControl2(
-                self.robot, j, pybullet.POSITION_CONTROL, targetPosition=v, force=force, maxVelocity=speed
-            )
-        self._couple_fingers(arm, g)
-        touching = False
-        prev = self.get_joints(g.finger_joints)
-        for k in range(int(max_time / self.time_step)):
-            self.p.stepSimulation()
-            if body is not None:
-                touching = all(self.p.getContactPoints(self.robot, body, fi, -1) for fi in finger_idx)
-                if touching:
-                    break
-            now = self.get_joints(g.finger_joints)
-            if k > 10 and np.max(np.abs(now - prev)) < 1e-6:
-                break  # the fingers stopped (closed or blocked)
-            prev = now
-        if body is None or not touching:
-            return False
-        # Hold the fingers where they touched and weld the part to the TCP so it cannot slip.
-        for j, v in zip(ids, self.get_joints(g.finger_joints), strict=True):
-            self.p.setJointMotorControl2(
-                self.robot, j, pybullet.POSITION_CONTROL, targetPosition=float(v), force=force, maxVelocity=speed
-            )
-        T_world_tcp = self.link_pose(g.tcp_link)
-        pos, orn = self.p.getBasePositionAndOrientation(body)
-        T_tcp_com = np.linalg.solve(T_world_tcp, _pb_to_pose(pos, orn))
-        p_rel, q_rel = _pose_to_pb(T_tcp_com)
-        # The TCP link's inertial frame is its link frame (URDF inertial origin at 0), as createConstraint expects.
-        cid = self.p.createConstraint(
-            self.robot,
-            self.link_index[g.tcp_link],
-            body,
-            -1,
-            pybullet.JOINT_FIXED,
-            [0, 0, 0],
-            p_rel,
-            [0, 0, 0],
-            parentFrameOrientation=q_rel,
-        )
-        self.p.changeConstraint(cid, maxForce=10000.0)
-        # The weld stands in for friction; finger contacts on top of it fight the constraint and make the
-        # part creep in the hand during fast motions (millimetres per carry), so they are off while held.
-        self._finger_contacts(g, body, enable=False)
-        self.constraints[arm] = (cid, part or "")
-        return True
-
-    def _couple_fingers(self, arm: str, g: GripperJoints) -> None:
-        """Gear the two fingers to move mirror-symmetrically (one motor drives both in a parallel gripper).
-
-        Independent finger servos meet the part one after the other, and the first pushes it across
-        the table (a peg lying on its side rolled 2.7 mm and tilted 2.7 deg in the demo's seed 18).
-        """
-        if arm in self._gears or len(g.finger_links) != 2:
-            return
-        f0, f1 = (self.link_index[ln] for ln in g.finger_links)
-        # The fingers slide along -y and +y of the gripper link: equal joint values, opposite motion.
-        cid = self.p.createConstraint(
-            self.robot, f0, self.robot, f1, pybullet.JOINT_GEAR, [0, 1, 0], [0, 0, 0], [0, 0, 0]
-        )
-        self.p.changeConstraint(cid, gearRatio=-1.0, maxForce=200.0, erp=0.2)
-        self._gears[arm] = cid
-
-    def _finger_contacts(self, g: GripperJoints, body: int, enable: bool) -> None:
-        for link in g.finger_links:
-            self.p.setCollisionFilterPair(self.robot, body, self.link_index[link], -1, int(enable))
-
-    # ------------------------------------------------------------ cameras
-    def rgb(
-        self,
-        T_world_cam: np.ndarray,
-        width: int,
-        height: int,
-        fx: float,
-        fy: float,
-        cx: float,
-        cy: float,
-        near: float = 0.05,
-        far: float = 5.0,
-    ) -> np.ndarray:
-        """RGB image ``(h, w, 3) uint8`` with TinyRenderer from an OpenCV-frame camera pose."""
-        eye = T_world_cam[:3, 3]
-        fwd = T_world_cam[:3, 2]
-        up = -T_world_cam[:3, 1]
-        view = self.p.computeViewMatrix(eye.tolist(), (eye + fwd).tolist(), up.tolist())
-        # OpenGL projection from the pinhole intrinsics
-        proj = np.zeros((4, 4))
-        proj[0, 0] = 2.0 * fx / width
-        proj[1, 1] = 2.0 * fy / height
-        proj[0, 2] = 1.0 - 2.0 * cx / width
-        proj[1, 2] = 2.0 * cy / height - 1.0
-        proj[2, 2] = -(far + near) / (far - near)
-        proj[2, 3] = -2.0 * far * near / (far - near)
-        proj[3, 2] = -1.0
-        # No segmentation mask: only the colours are used, and TinyRenderer's mask pass costs time per frame.
-        img = self.p.getCameraImage(
-            width,
-            height,
-            view,
-            proj.T.reshape(-1).tolist(),
-            renderer=pybullet.ER_TINY_RENDERER,
-            flags=pybullet.ER_NO_SEGMENTATION_MASK,
-        )
-        rgba = np.reshape(np.asarray(img[2], dtype=np.uint8), (height, width, 4))
-        return rgba[:, :, :3].copy()
 
     def close(self) -> None:
         try:

@@ -34,7 +34,7 @@ from pydantic import Field
 
 from asmteach.core import geometry
 from asmteach.core.arm.robot import ArmRobot, ArmRobotSettings, ArmSpec
-from asmteach.core.arm.sim import GripperJoints
+from asmteach.core.arm.sim_gripper import GripperJoints
 from asmteach.core.errors import UserError
 from asmteach.core.models import Mat4
 from asmteach.plugins.robots.nextage.build_urdf import GRIPPER, URDF_PATH

@@ -39,7 +39,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from asmteach.core.arm.robot import ArmRobot, ArmRobotSettings, ArmSpec
-from asmteach.core.arm.sim import GripperJoints
+from asmteach.core.arm.sim_gripper import GripperJoints
 from asmteach.core.errors import UserError
 from asmteach.core.models import HandSpec, Mat4, StrictModel
 from asmteach.core.urdf import resolve_urdf as resolve_packages
