@@ -5,7 +5,9 @@ Robot plugins build on it (the Nextage, ``urdf_arm``); it depends on the core on
 - :mod:`~asmteach.core.arm.robot`: :class:`ArmRobot` (a :class:`~asmteach.core.interfaces.Robot` and
   :class:`~asmteach.core.robot.World`), its settings, :class:`ArmSpec` (one arm as a subclass describes it);
 - :mod:`~asmteach.core.arm.scene`: :class:`ArmScene`, its :class:`~asmteach.core.robot.PlanningScene`;
-- :mod:`~asmteach.core.arm.kinematics`: URDF kinematics (FK, damped-least-squares IK);
+- :mod:`~asmteach.core.arm.kinematics`: URDF kinematics (arm chains, joint limits, FK, Jacobian, IK entry point);
+- :mod:`~asmteach.core.arm.dls_ik`: the damped-least-squares IK solver and its settings;
+- :mod:`~asmteach.core.arm.joint_poses`: joint poses of many configurations at once (vectorised FK);
 - :mod:`~asmteach.core.arm.batch_ik`: IK of many targets at once;
 - :mod:`~asmteach.core.arm.collision`: batch collision and clearance checks;
 - :mod:`~asmteach.core.arm.sim`: the PyBullet world (robot, table, parts, trajectory execution);

@@ -29,7 +29,8 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from asmteach.core.arm.kinematics import ArmChain, Kinematics, flip_jaw
+from asmteach.core.arm.dls_ik import flip_jaw
+from asmteach.core.arm.kinematics import ArmChain, Kinematics
 from asmteach.core.interfaces import IKResult
 
 __all__ = ["ik_many"]

@@ -7,56 +7,28 @@ Poses are world-frame 4x4 transforms: the URDF root is placed at
 prismatic joints) in chain order; joints outside the arm keep the values of the
 full configuration held by :class:`Kinematics` (``q_full``).
 
-IK is damped least squares on SE(3) (pinocchio's log map and its Jacobian)
-with clamping to the joint limits, started from the seed, then from the
-arm's home and then from random configurations (seeded generator) until one
-converges. A failure returns the best residual and the reason; it never raises.
+IK (:meth:`Kinematics.ik`) is damped least squares on SE(3), solved by
+:mod:`~asmteach.core.arm.dls_ik`; the vectorised joint poses that collision
+checking needs come from :mod:`~asmteach.core.arm.joint_poses`.
 """
 
 from __future__ import annotations
 
 import difflib
 import itertools
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-from pydantic import Field
 
+from asmteach.core.arm.dls_ik import DlsSolver, IKSettings, flip_jaw
+from asmteach.core.arm.joint_poses import JointPoses
 from asmteach.core.arm.urdf_check import UrdfInfo, check_urdf
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import IKResult
-from asmteach.core.models import StrictModel
 
-__all__ = ["ArmChain", "IKSettings", "Kinematics", "flip_jaw"]
-
-FLIP_Z = np.diag([-1.0, -1.0, 1.0, 1.0])
-"""TCP rotated 180 deg about its z (approach) axis: the other finger order of a symmetric jaw."""
-
-
-def flip_jaw(T_world_tcp: np.ndarray) -> np.ndarray:
-    """The same grasp with the fingers swapped: ``T @ Rz(pi)``."""
-    return np.asarray(T_world_tcp, dtype=float) @ FLIP_Z
-
-
-class IKSettings(StrictModel):
-    """Damped-least-squares IK options."""
-
-    tol_pos: float = Field(1e-5, gt=0.0, description="position tolerance, metres")
-    tol_rot: float = Field(1e-4, gt=0.0, description="orientation tolerance, radians")
-    max_iters: int = Field(60, ge=1, description="iterations per start")
-    max_starts: int = Field(40, ge=1, description="seed, home, then random starts")
-    batch_starts: int = Field(
-        4,
-        ge=1,
-        description="starts per target when many targets are solved at once (random ones only for "
-        "targets that neither the seed nor the home reach)",
-    )
-    damping: float = Field(1e-6, gt=0.0, description="DLS damping lambda^2 (m^2)")
-    max_step: float = Field(0.4, gt=0.0, description="largest joint step per iteration, radians")
-    try_flipped: bool = Field(True, description="for grasps, also try the TCP turned 180 deg about z")
+__all__ = ["ArmChain", "Kinematics"]
 
 
 @dataclass
@@ -77,14 +49,6 @@ class ArmChain:
     @property
     def dof(self) -> int:
         return len(self.joint_names)
-
-
-@dataclass
-class _Reduced:
-    model: pin.Model
-    data: pin.Data
-    fid: int
-    key: tuple[float, ...]
 
 
 def _closest(name: str, choices: list[str]) -> str:
@@ -133,7 +97,8 @@ class Kinematics:
         self.arms: dict[str, ArmChain] = {}
         for arm, (jnames, tcp) in arms.items():
             self.arms[arm] = self._make_chain(arm, list(jnames), tcp, (homes or {}).get(arm))
-        self._reduced: dict[str, _Reduced] = {}
+        self._ik = DlsSolver(self)
+        self._poses = JointPoses(self)
 
     # ------------------------------------------------------------ set-up
     def _make_chain(self, arm: str, jnames: list[str], tcp: str, home: np.ndarray | None) -> ArmChain:
@@ -246,21 +211,6 @@ class Kinematics:
         return np.vstack([R @ J[:3], R @ J[3:]])
 
     # ------------------------------------------------------------ IK
-    def _reduced_model(self, arm: str) -> _Reduced:
-        """The arm alone (other joints locked at ``q_full``); rebuilt when a locked ancestor moves."""
-        c = self.chain(arm)
-        m = self.model
-        ancestors = [j for j in list(m.supports[c.joint_ids[0]])[1:] if j not in c.joint_ids]
-        key = tuple(float(self.q_full[m.joints[j].idx_q]) for j in ancestors)
-        cached = self._reduced.get(arm)
-        if cached is not None and cached.key == key:
-            return cached
-        lock = [j for j in range(1, m.njoints) if j not in c.joint_ids]
-        rm = pin.buildReducedModel(m, lock, self.q_full)
-        red = _Reduced(rm, rm.createData(), rm.getFrameId(c.tcp_frame), key)
-        self._reduced[arm] = red
-        return red
-
     def ik(
         self,
         arm: str,
@@ -284,145 +234,21 @@ class Kinematics:
         except UserError as exc:
             return IKResult(False, None, reason=str(exc))
         rng = rng if rng is not None else np.random.default_rng(0)
-        res = self._solve(c, T, q_seed, rng)
+        res = self._ik.solve(c, T, q_seed, rng)
         try_flip = self.settings.try_flipped if flipped is None else flipped
         if not res.success and try_flip:
-            alt = self._solve(c, flip_jaw(T), q_seed, rng)
+            alt = self._ik.solve(c, flip_jaw(T), q_seed, rng)
             if alt.success:
                 alt.flipped = True
                 return alt
         return res
 
-    def _solve(self, c: ArmChain, T_world: np.ndarray, q_seed: np.ndarray | None, rng: np.random.Generator) -> IKResult:
-        s = self.settings
-        T_base = np.linalg.solve(self.T_world_base, T_world)
-        red = self._reduced_model(c.name)
-        # Reach check against the chain's first joint: a target beyond the sum of link offsets is hopeless.
-        pin.forwardKinematics(self.model, self.data, self.q_full)
-        shoulder = self.data.oMi[c.joint_ids[0]].translation
-        dist = float(np.linalg.norm(T_base[:3, 3] - shoulder))
-        if dist > c.reach * 1.001:
-            return IKResult(
-                False,
-                None,
-                residual_pos=dist - c.reach,
-                residual_rot=float("nan"),
-                reason=f"target outside the workspace: {dist:.3f} m from the arm's first joint, "
-                f"reach at most {c.reach:.3f} m",
-            )
-        oMdes = pin.SE3(T_base[:3, :3].copy(), T_base[:3, 3].copy())
-        starts: list[np.ndarray] = []
-        if q_seed is not None:
-            starts.append(np.clip(np.asarray(q_seed, dtype=float), c.lower, c.upper))
-        starts.append(c.home.copy())
-        best: tuple[float, float, np.ndarray | None] = (float("inf"), float("inf"), None)
-        for k in range(s.max_starts):
-            q0 = starts[k] if k < len(starts) else rng.uniform(c.lower, c.upper)
-            ok, q, ep, er = self._dls(red, oMdes, q0, c.lower, c.upper)
-            if ok:
-                return IKResult(True, q, residual_pos=ep, residual_rot=er)
-            if ep + 0.1 * er < best[0] + 0.1 * best[1]:
-                best = (ep, er, q)
-        return IKResult(
-            False,
-            None,
-            residual_pos=best[0],
-            residual_rot=best[1],
-            reason=f"no solution within the joint limits after {s.max_starts} starts "
-            f"(best residual {best[0] * 1000:.2f} mm, {math.degrees(best[1]):.2f} deg)",
-        )
-
-    def _dls(
-        self, red: _Reduced, oMdes: pin.SE3, q: np.ndarray, lower: np.ndarray, upper: np.ndarray
-    ) -> tuple[bool, np.ndarray, float, float]:
-        s = self.settings
-        rm, rd, fid = red.model, red.data, red.fid
-        eye = np.eye(6) * s.damping
-        ep = er = float("inf")
-        for _ in range(s.max_iters):
-            pin.forwardKinematics(rm, rd, q)
-            oMf = pin.updateFramePlacement(rm, rd, fid)
-            iMd = oMf.actInv(oMdes)
-            err = pin.log6(iMd).vector  # in the TCP frame
-            ep = float(np.linalg.norm(iMd.translation))
-            er = float(np.linalg.norm(err[3:]))
-            if ep < s.tol_pos and er < s.tol_rot:
-                return True, q, ep, er
-            J = pin.computeFrameJacobian(rm, rd, q, fid, pin.LOCAL)
-            J = -pin.Jlog6(iMd.inverse()) @ J
-            v = -J.T @ np.linalg.solve(J @ J.T + eye, err)
-            n = float(np.max(np.abs(v)))
-            if n > s.max_step:
-                v *= s.max_step / n
-            q = np.clip(q + v, lower, upper)
-        return False, q, ep, er
-
     # ------------------------------------------------------------ batch FK (for collision checking)
     def moving_joints(self, arm: str) -> list[int]:
         """Ids of the joints whose world pose depends on the arm's joints (chain and descendants)."""
-        cache = self.__dict__.setdefault("_moving_cache", {})
-        if arm not in cache:
-            first = self.chain(arm).joint_ids[0]
-            cache[arm] = [j for j in range(1, self.model.njoints) if first in list(self.model.supports[j])]
-        return list(cache[arm])
-
-    def _joint_plan(self, arm: str) -> tuple[list[np.ndarray], list[tuple]]:
-        """Static joint poses at ``q_full`` and the arm's per-joint recipe, cached until ``q_full`` changes.
-
-        Single-configuration collision queries (one per planner state) spent most
-        of their time recomputing these.
-        """
-        key = self.q_full.tobytes()
-        cache = self.__dict__.setdefault("_plan_cache", {})
-        hit = cache.get(arm)
-        if hit is not None and hit[0] == key:
-            return hit[1], hit[2]
-        c = self.chain(arm)
-        m, d = self.model, self.data
-        pin.forwardKinematics(m, d, self.q_full)
-        static = [self.T_world_base @ d.oMi[j].homogeneous for j in range(m.njoints)]
-        steps = []
-        for j in self.moving_joints(arm):
-            parent = m.parents[j]
-            M = m.jointPlacements[j].homogeneous
-            if j in c.joint_ids:
-                S = np.asarray(d.joints[j].S).reshape(6, -1)[:, 0]  # motion subspace: (linear, angular)
-                steps.append((j, parent, M, S, c.joint_ids.index(j), None))
-            else:
-                # not an arm joint: its own displacement stays at q_full
-                fixed = np.linalg.solve(M, np.linalg.solve(static[parent], static[j]))[None]
-                steps.append((j, parent, M, None, -1, fixed))
-        cache[arm] = (key, static, steps)
-        return static, steps
+        return self._poses.moving_joints(arm)
 
     def batch_joint_poses(self, arm: str, qs: np.ndarray) -> tuple[dict[int, np.ndarray], list[np.ndarray]]:
-        """World poses of every joint frame for ``n`` arm configurations, vectorised with numpy.
-
-        Returns ``(moving, static)``: ``moving[j]`` is ``(n, 4, 4)`` for joints that
-        move with the arm; ``static[j]`` is ``(4, 4)`` for every joint (at ``q_full``),
-        index 0 being the URDF root. Uses the joint placements and motion axes of
-        the pinocchio model; checked against pinocchio's FK in the tests.
-        """
-        qs = np.atleast_2d(np.asarray(qs, dtype=float))
-        n = qs.shape[0]
-        static, steps = self._joint_plan(arm)
-        moving: dict[int, np.ndarray] = {}
-        for j, parent, M, S, k, fixed in steps:
-            T_parent = moving[parent] if parent in moving else np.broadcast_to(static[parent], (n, 4, 4))
-            moving[j] = T_parent @ (M @ (_axis_motion(S, qs[:, k]) if S is not None else fixed))
-        return moving, static
-
-
-def _axis_motion(S: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """``(n, 4, 4)`` joint displacements for a 1-DOF revolute (angular S) or prismatic (linear S) joint."""
-    n = q.shape[0]
-    T = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
-    lin, ang = S[:3], S[3:]
-    if np.linalg.norm(ang) > 0.5:
-        k = ang / np.linalg.norm(ang)
-        K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-        s, cth = np.sin(q)[:, None, None], np.cos(q)[:, None, None]
-        T[:, :3, :3] = np.eye(3) + s * K + (1.0 - cth) * (K @ K)
-    else:
-        T[:, :3, 3] = q[:, None] * lin[None, :]
-    return T
+        """World poses of every joint frame for ``n`` arm configurations ``(n, dof)``; see
+        :meth:`JointPoses.batch <asmteach.core.arm.joint_poses.JointPoses.batch>`."""
+        return self._poses.batch(arm, qs)

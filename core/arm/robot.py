@@ -26,7 +26,8 @@ from pydantic import Field
 
 from asmteach.core.arm.batch_ik import ik_many
 from asmteach.core.arm.collision import CollisionChecker
-from asmteach.core.arm.kinematics import IKSettings, Kinematics
+from asmteach.core.arm.dls_ik import IKSettings
+from asmteach.core.arm.kinematics import Kinematics
 from asmteach.core.arm.plan_check import CheckedArm, PlanCheck
 from asmteach.core.arm.plan_checker import recheck_plan
 from asmteach.core.arm.scene import ArmScene, SceneBinding

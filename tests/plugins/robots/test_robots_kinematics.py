@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from asmteach.core import geometry
-from asmteach.core.arm.kinematics import flip_jaw
+from asmteach.core.arm.dls_ik import flip_jaw
 from asmteach.core.errors import UserError
 from asmteach.plugins.robots.nextage.robot import NextagePyBullet
 
