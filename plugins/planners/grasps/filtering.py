@@ -3,10 +3,11 @@
 Each grasp (part frame) is moved to the part's pose ``T_world_part``; then, in
 this order, the hand (palm and fingers open for the approach) is checked
 against the world's obstacles with python-fcl, IK is solved on each arm (first
-success wins) and the arm at that solution is checked with the robot's own
-collision model. The verdict keeps the reason of a rejection: which collision
-pair, or that no arm reached the pose. The grasped part itself is not an
-obstacle (the hand touches it by design); pass the table and other parts.
+success wins) and the arm at that solution is checked in a planning scene
+(the robot's own collision model; the robot is never changed). The verdict
+keeps the reason of a rejection: which collision pair, or that no arm reached
+the pose. The grasped part itself is not an obstacle (the hand touches it by
+design); pass the table and other parts.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import trimesh
 from asmteach.core.hand_geometry import MeshCollider, hand_boxes
 from asmteach.core.interfaces import Obstacle, Robot
 from asmteach.core.models import Grasp
+from asmteach.core.robot import PlanningScene
 
 __all__ = ["STATUS_COLORS", "GraspVerdict", "filter_grasps_at_pose", "render_verdicts"]
 
@@ -60,6 +62,7 @@ def filter_grasps_at_pose(
     clearance: float = 0.002,
     approach_sweep: float = 0.0,
     q_seed: dict[str, np.ndarray] | None = None,
+    scene: PlanningScene | None = None,
 ) -> list[GraspVerdict]:
     """Verdict per grasp, in the order given.
 
@@ -67,15 +70,17 @@ def filter_grasps_at_pose(
     ----------
     grasps : grasps in the part frame.
     T_world_part : ``(4, 4)`` pose of the part.
-    robot : kinematics and arm collision checking; its obstacles are replaced by ``obstacles``.
+    robot : kinematics (IK) and the hand.
     obstacles : the world (table, other parts) as meshes at world poses.
     arms : arms to try, in order; default ``robot.arms``.
     clearance : per-side finger clearance of the open hand (metres).
     approach_sweep : also check the hand swept back along its approach by this much (metres).
     q_seed : IK seed per arm; default the arm's home configuration.
+    scene : where the arm is checked for collision (the other arms where it has them), with its obstacles
+        replaced by ``obstacles``; default ``robot.scene``.
     """
     T_world_part = np.asarray(T_world_part, dtype=float)
-    robot.set_obstacles(list(obstacles))
+    scene = (robot.scene if scene is None else scene).with_obstacles(list(obstacles))
     collider = MeshCollider({o.name: (o.mesh, np.asarray(o.T_world, dtype=float)) for o in obstacles})
     hand = robot.hand
     arm_list = list(arms) if arms is not None else list(robot.arms)
@@ -88,12 +93,14 @@ def filter_grasps_at_pose(
             pair = (f"hand/{hit[0]}", hit[1])
             out.append(GraspVerdict(g, "collision", T, collision=pair, reason=f"{pair[0]} hits {pair[1]}"))
             continue
-        verdict = _ik_and_arm(robot, g, T, arm_list, q_seed or {})
+        verdict = _ik_and_arm(robot, scene, g, T, arm_list, q_seed or {})
         out.append(verdict)
     return out
 
 
-def _ik_and_arm(robot: Robot, g: Grasp, T: np.ndarray, arms: list[str], q_seed: dict[str, np.ndarray]) -> GraspVerdict:
+def _ik_and_arm(
+    robot: Robot, scene: PlanningScene, g: Grasp, T: np.ndarray, arms: list[str], q_seed: dict[str, np.ndarray]
+) -> GraspVerdict:
     failures: dict[str, str] = {}
     colliding: GraspVerdict | None = None
     for arm in arms:
@@ -103,8 +110,8 @@ def _ik_and_arm(robot: Robot, g: Grasp, T: np.ndarray, arms: list[str], q_seed: 
             failures[arm] = ik.reason or "no IK solution"
             continue
         q = np.asarray(ik.q, dtype=float)
-        if bool(robot.in_collision(arm, q[None, :])[0]):
-            pairs = robot.collision_report(arm, q)
+        if bool(scene.in_collision(arm, q[None, :])[0]):
+            pairs = scene.collision_report(arm, q)
             pair = pairs[0] if pairs else (f"{arm} arm", "world")
             if colliding is None:
                 colliding = GraspVerdict(

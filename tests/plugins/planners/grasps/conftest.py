@@ -12,6 +12,7 @@ from asmteach.core import geometry
 from asmteach.core.interfaces import IKResult, Obstacle, PartModel, Robot
 from asmteach.core.models import HandSpec, PartSpec, Primitive, SolidSpec
 from asmteach.core.parts import build_part
+from asmteach.core.robot import PlanningScene
 
 
 def make_hand() -> HandSpec:
@@ -33,6 +34,34 @@ def box_part(size: Sequence[float], name: str = "box", subtract: Sequence[Primit
     return build_part(PartSpec(name=name, solid=SolidSpec(add=add, subtract=list(subtract))))
 
 
+class WristScene(PlanningScene):
+    """The point arm's scene: its wrist sphere (radius 0.03 m) checked against the obstacles' bounding boxes."""
+
+    def __init__(self, robot: PointArm, configuration: dict[str, np.ndarray]) -> None:
+        super().__init__(configuration)
+        self.robot = robot
+
+    def _hits(self, q: np.ndarray) -> list[tuple[str, str]]:
+        c = self.robot.wrist(q)
+        out = []
+        for ob in self.obstacles:
+            m = ob.mesh.copy()
+            m.apply_transform(ob.T_world)
+            lo, hi = m.bounds
+            if np.linalg.norm(c - np.clip(c, lo, hi)) < 0.03:
+                out.append(("wrist", ob.name))
+        return out
+
+    def in_collision(self, arm: str, qs: np.ndarray, *, ignore: Sequence[str] = ()) -> np.ndarray:
+        return np.array([bool(self._hits(q)) for q in np.atleast_2d(qs)])
+
+    def clearance(self, arm: str, qs: np.ndarray, upto: float = np.inf) -> np.ndarray:
+        return np.full(len(np.atleast_2d(qs)), min(1.0, upto))
+
+    def collision_reports(self, arm: str, qs: np.ndarray) -> list[list[tuple[str, str]]]:
+        return [self._hits(q) for q in np.atleast_2d(qs)]
+
+
 class PointArm(Robot):
     """A robot double: the TCP can reach any pose within ``reach`` of its base, approaching not from below.
 
@@ -46,7 +75,7 @@ class PointArm(Robot):
         self._hand = hand
         self.base = np.asarray(base, dtype=float)
         self.reach = reach
-        self.obstacles: list[Obstacle] = []
+        self.scene = WristScene(self, {"left": self.home("left")})
 
     @property
     def arms(self) -> list[str]:
@@ -81,34 +110,6 @@ class PointArm(Robot):
     def wrist(self, q: np.ndarray) -> np.ndarray:
         T = self.fk("left", q)
         return T[:3, 3] - 0.12 * T[:3, 2]
-
-    def set_obstacles(self, obstacles: Sequence[Obstacle]) -> None:
-        self.obstacles = list(obstacles)
-
-    def attach(
-        self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None, *, width: float | None = None
-    ) -> None:
-        pass
-
-    def _hits(self, q: np.ndarray) -> list[tuple[str, str]]:
-        c = self.wrist(q)
-        out = []
-        for ob in self.obstacles:
-            m = ob.mesh.copy()
-            m.apply_transform(ob.T_world)
-            lo, hi = m.bounds
-            if np.linalg.norm(c - np.clip(c, lo, hi)) < 0.03:
-                out.append(("wrist", ob.name))
-        return out
-
-    def in_collision(self, arm: str, qs: np.ndarray, *, ignore: Sequence[str] = ()) -> np.ndarray:
-        return np.array([bool(self._hits(q)) for q in np.atleast_2d(qs)])
-
-    def clearance(self, arm: str, qs: np.ndarray, upto: float = np.inf) -> np.ndarray:
-        return np.full(len(np.atleast_2d(qs)), min(1.0, upto))
-
-    def collision_report(self, arm: str, q: np.ndarray) -> list[tuple[str, str]]:
-        return self._hits(q)
 
 
 def table_obstacle() -> Obstacle:

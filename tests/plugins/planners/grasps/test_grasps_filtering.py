@@ -30,7 +30,9 @@ def test_verdicts_match_geometry(block, hand, point_arm, table, tmp_path) -> Non
     T_world_part = geometry.from_rpy(0, 0, 0.3, t=[0.25, 0.05, 0.15])
     pedestal = _box_obstacle("pedestal", [0.03, 0.03, 0.15], [0.25, 0.05, 0.075])
     obstacles = [table, pedestal]
+    before = point_arm.scene
     verdicts = filter_grasps_at_pose(grasps, T_world_part, point_arm, obstacles)
+    assert point_arm.scene is before and before.obstacles == ()  # checked in a scene of its own
     assert len(verdicts) == len(grasps)
     counts = {s: sum(v.status == s for v in verdicts) for s in STATUS_COLORS}
     assert all(n > 0 for n in counts.values()), counts
