@@ -9,7 +9,9 @@ Robot plugins build on it (the Nextage, ``urdf_arm``); it depends on the core on
 - :mod:`~asmteach.core.arm.dls_ik`: the damped-least-squares IK solver and its settings;
 - :mod:`~asmteach.core.arm.joint_poses`: joint poses of many configurations at once (vectorised FK);
 - :mod:`~asmteach.core.arm.batch_ik`: IK of many targets at once;
-- :mod:`~asmteach.core.arm.collision`: batch collision and clearance checks;
+- :mod:`~asmteach.core.arm.collision`: batch collision and clearance checks (:class:`CollisionChecker`);
+- :mod:`~asmteach.core.arm.collision_geometry`: its collision objects (URDF links, table, obstacles, held parts);
+- :mod:`~asmteach.core.arm.obb`: vectorised oriented-box overlap and gap;
 - :mod:`~asmteach.core.arm.sim`: the PyBullet world (robot, table, parts, trajectory execution);
 - :mod:`~asmteach.core.arm.sim_gripper`: :class:`GripperJoints` and gripping in that world;
 - :mod:`~asmteach.core.arm.sim_camera`: its RGB camera images;

@@ -14,106 +14,24 @@ the pinocchio model. For a batch of ``n`` arm configurations:
    held part that survive step 2 go to python-fcl's exact narrow phase.
 
 Frames: world (z up, metres). Clearance is python-fcl's minimum distance.
+The collision objects are built in :mod:`~asmteach.core.arm.collision_geometry`;
+the vectorised box tests are in :mod:`~asmteach.core.arm.obb`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 
 import fcl
 import numpy as np
-import pinocchio as pin
-import trimesh
 
+from asmteach.core.arm.collision_geometry import Geom, box_geom, fcl_transform, mesh_geom, robot_geoms
 from asmteach.core.arm.kinematics import Kinematics
-from asmteach.core.arm.urdf_check import resolve_mesh
+from asmteach.core.arm.obb import obb_gap, obb_overlap
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Obstacle, PartModel
 
-__all__ = ["CollisionChecker", "obb_overlap"]
-
-
-@dataclass
-class _Geom:
-    """One collision object: OBB in its own frame, fcl geometry, how it is posed."""
-
-    name: str
-    link: str
-    joint: int  # parent joint id (-1: world-fixed obstacle)
-    placement: np.ndarray  # (4, 4) geometry frame in the parent joint frame (or world)
-    obb: np.ndarray  # (4, 4) OBB frame in the geometry frame
-    half: np.ndarray  # (3,) OBB half extents
-    exact: bool  # True when the OBB is the geometry (a box)
-    fcl_geom: object = None
-    fcl_obj: object = None
-    tags: set[str] = field(default_factory=set)
-    kind: str = "box"  # box, cylinder, sphere or mesh
-    mesh: trimesh.Trimesh | None = None  # the mesh of a mesh geometry, in its geometry frame
-
-    @property
-    def radius(self) -> float:
-        return float(np.linalg.norm(self.half))
-
-
-def _bvh(mesh: trimesh.Trimesh) -> fcl.BVHModel:
-    m = fcl.BVHModel()
-    v = np.asarray(mesh.vertices, dtype=float)
-    f = np.asarray(mesh.faces, dtype=int)
-    m.beginModel(len(v), len(f))
-    m.addSubModel(v, f)
-    m.endModel()
-    return m
-
-
-def _mesh_geom(name: str, link: str, joint: int, placement: np.ndarray, mesh: trimesh.Trimesh) -> _Geom:
-    obb = mesh.bounding_box_oriented
-    return _Geom(
-        name,
-        link,
-        joint,
-        placement,
-        np.asarray(obb.primitive.transform, dtype=float),
-        0.5 * np.asarray(obb.primitive.extents, dtype=float),
-        False,
-        _bvh(mesh),
-        kind="mesh",
-        mesh=mesh,
-    )
-
-
-def _box_geom(name: str, link: str, joint: int, placement: np.ndarray, size: np.ndarray) -> _Geom:
-    size = np.asarray(size, dtype=float)
-    return _Geom(name, link, joint, placement, np.eye(4), 0.5 * size, True, fcl.Box(*size))
-
-
-def obb_overlap(
-    cA: np.ndarray, RA: np.ndarray, hA: np.ndarray, cB: np.ndarray, RB: np.ndarray, hB: np.ndarray
-) -> np.ndarray:
-    """Separating-axis test of oriented boxes, vectorised: True where boxes ``A[k]`` and ``B[k]`` overlap.
-
-    ``c*`` are ``(m, 3)`` centres, ``R*`` ``(m, 3, 3)`` rotations (columns: box axes in
-    the world), ``h*`` ``(m, 3)`` half extents. Touching boxes count as overlapping.
-    """
-    R = np.einsum("mji,mjk->mik", RA, RB)  # B's axes in A's frame
-    t = np.einsum("mji,mj->mi", RA, cB - cA)  # B's centre in A's frame
-    aR = np.abs(R) + 1e-9
-    sep = np.any(np.abs(t) > hA + np.einsum("mij,mj->mi", aR, hB), axis=1)
-    tb = np.einsum("mi,mij->mj", t, R)
-    sep |= np.any(np.abs(tb) > np.einsum("mi,mij->mj", hA, aR) + hB, axis=1)
-    for i in range(3):
-        i1, i2 = (i + 1) % 3, (i + 2) % 3
-        for j in range(3):
-            j1, j2 = (j + 1) % 3, (j + 2) % 3
-            lhs = np.abs(t[:, i2] * R[:, i1, j] - t[:, i1] * R[:, i2, j])
-            rhs = (
-                hA[:, i1] * aR[:, i2, j]
-                + hA[:, i2] * aR[:, i1, j]
-                + hB[:, j1] * aR[:, i, j2]
-                + hB[:, j2] * aR[:, i, j1]
-            )
-            sep |= lhs > rhs
-    return ~sep
+__all__ = ["CollisionChecker"]
 
 
 class CollisionChecker:
@@ -136,63 +54,21 @@ class CollisionChecker:
         self.kin = kin
         self.disabled: set[frozenset[str]] = set(kin.info.adjacent) | {frozenset(p) for p in disabled}
         self.hand_links = {a: set(v) for a, v in (hand_links or {}).items()}
-        self.robot: list[_Geom] = self._robot_geoms()
-        self.table: _Geom | None = None
-        self.obstacles: list[_Geom] = []
-        self.held: dict[str, _Geom] = {}
-        self._pairs: dict[tuple[str, ...], tuple[list[_Geom], np.ndarray, np.ndarray, np.ndarray]] = {}
+        self.robot: list[Geom] = robot_geoms(kin)
+        self.table: Geom | None = None
+        self.obstacles: list[Geom] = []
+        self.held: dict[str, Geom] = {}
+        self._pairs: dict[tuple[str, ...], tuple[list[Geom], np.ndarray, np.ndarray, np.ndarray]] = {}
 
     # ------------------------------------------------------------ geometry
-    def _robot_geoms(self) -> list[_Geom]:
-        kin = self.kin
-        try:
-            gm = pin.buildGeomFromUrdf(kin.model, str(kin.urdf), pin.COLLISION, package_dirs=[str(kin.urdf.parent)])
-        except Exception as exc:  # noqa: BLE001 - pinocchio raises plain RuntimeErrors
-            raise UserError(f"{kin.urdf}: cannot read the collision geometry ({exc})") from None
-        out: list[_Geom] = []
-        for go in gm.geometryObjects:
-            link = kin.model.frames[go.parentFrame].name
-            P = go.placement.homogeneous
-            g = go.geometry
-            kind = type(g).__name__
-            name = f"{link}/{go.name}"
-            if kind == "Box":
-                geom = _box_geom(name, link, go.parentJoint, P, 2.0 * np.asarray(g.halfSide))
-            elif kind == "Cylinder":
-                r, h = float(g.radius), 2.0 * float(g.halfLength)
-                geom = _Geom(
-                    name,
-                    link,
-                    go.parentJoint,
-                    P,
-                    np.eye(4),
-                    np.array([r, r, 0.5 * h]),
-                    False,
-                    fcl.Cylinder(r, h),
-                    kind="cylinder",
-                )
-            elif kind == "Sphere":
-                r = float(g.radius)
-                geom = _Geom(
-                    name, link, go.parentJoint, P, np.eye(4), np.full(3, r), False, fcl.Sphere(r), kind="sphere"
-                )
-            else:  # a mesh: load it with trimesh (pinocchio resolved the path) and scale it
-                path = resolve_mesh(go.meshPath, kin.urdf.parent)
-                mesh = trimesh.load(path, force="mesh")
-                mesh.apply_scale(np.asarray(go.meshScale, dtype=float))
-                geom = _mesh_geom(name, link, go.parentJoint, P, mesh)
-            geom.fcl_obj = fcl.CollisionObject(geom.fcl_geom, fcl.Transform())
-            out.append(geom)
-        return out
-
     def set_table(
         self, center_xy: Sequence[float], size_xy: Sequence[float], height: float, thickness: float = 0.05
     ) -> None:
         """The table as a box whose top face is at ``height`` (world z, metres)."""
         T = np.eye(4)
         T[:3, 3] = [center_xy[0], center_xy[1], height - 0.5 * thickness]
-        g = _box_geom("table", "table", -1, T, np.array([size_xy[0], size_xy[1], thickness]))
-        g.fcl_obj = fcl.CollisionObject(g.fcl_geom, _tf(T))
+        g = box_geom("table", "table", -1, T, np.array([size_xy[0], size_xy[1], thickness]))
+        g.fcl_obj = fcl.CollisionObject(g.fcl_geom, fcl_transform(T))
         self.table = g
         self._pairs.clear()
 
@@ -201,8 +77,8 @@ class CollisionChecker:
         out = []
         for ob in obstacles:
             T = np.asarray(ob.T_world, dtype=float)
-            g = _mesh_geom(ob.name, ob.name, -1, T, ob.mesh)
-            g.fcl_obj = fcl.CollisionObject(g.fcl_geom, _tf(T))
+            g = mesh_geom(ob.name, ob.name, -1, T, ob.mesh)
+            g.fcl_obj = fcl.CollisionObject(g.fcl_geom, fcl_transform(T))
             out.append(g)
         self.obstacles = out
         self._pairs.clear()
@@ -217,14 +93,14 @@ class CollisionChecker:
                 raise UserError(f"attach({arm!r}, {part.name!r}): T_tcp_part is required")
             frame = self.kin.model.frames[self.kin.model.getFrameId(chain.tcp_frame)]
             P = frame.placement.homogeneous @ np.asarray(T_tcp_part, dtype=float)
-            g = _mesh_geom(f"held:{part.name}", f"held:{part.name}", frame.parentJoint, P, part.mesh)
+            g = mesh_geom(f"held:{part.name}", f"held:{part.name}", frame.parentJoint, P, part.mesh)
             g.fcl_obj = fcl.CollisionObject(g.fcl_geom, fcl.Transform())
             g.tags.add(arm)
             self.held[arm] = g
         self._pairs.clear()
 
     # ------------------------------------------------------------ pairs
-    def _pair_set(self, arm: str, ignore: Sequence[str]) -> tuple[list[_Geom], np.ndarray, np.ndarray, np.ndarray]:
+    def _pair_set(self, arm: str, ignore: Sequence[str]) -> tuple[list[Geom], np.ndarray, np.ndarray, np.ndarray]:
         """Objects (moving first) and the candidate pairs ``(a, b)`` with an exactness flag, cached."""
         key = (arm, *sorted(ignore))
         if key in self._pairs:
@@ -260,7 +136,7 @@ class CollisionChecker:
         self._pairs[key] = (objs, A, B, exact)
         return self._pairs[key]
 
-    def _poses(self, arm: str, qs: np.ndarray, objs: list[_Geom]) -> np.ndarray:
+    def _poses(self, arm: str, qs: np.ndarray, objs: list[Geom]) -> np.ndarray:
         """World poses of every object's geometry frame: ``(n, len(objs), 4, 4)``."""
         moving, static = self.kin.batch_joint_poses(arm, qs)
         n = qs.shape[0]
@@ -277,7 +153,7 @@ class CollisionChecker:
     # ------------------------------------------------------------ queries
     def _hits(
         self, arm: str, qs: np.ndarray, ignore: Sequence[str], stop_early: bool = True
-    ) -> tuple[list[_Geom], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    ) -> tuple[list[Geom], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Contacts for ``n`` configurations: ``(objs, poses, config index, pair index, hit)``."""
         objs, A, B, exact = self._pair_set(arm, ignore)
         n = qs.shape[0]
@@ -321,8 +197,8 @@ class CollisionChecker:
             if stop_early and done[ci[k]]:
                 continue  # this configuration is already known to collide
             ga, gb = objs[A[pi[k]]], objs[B[pi[k]]]
-            ga.fcl_obj.setTransform(_tf(poses[ci[k], A[pi[k]]]))
-            gb.fcl_obj.setTransform(_tf(poses[ci[k], B[pi[k]]]))
+            ga.fcl_obj.setTransform(fcl_transform(poses[ci[k], A[pi[k]]]))
+            gb.fcl_obj.setTransform(fcl_transform(poses[ci[k], B[pi[k]]]))
             hit[k] = fcl.collide(ga.fcl_obj, gb.fcl_obj, req, fcl.CollisionResult()) > 0
             done[ci[k]] |= hit[k]
         return objs, poses, ci, pi, hit
@@ -375,8 +251,8 @@ class CollisionChecker:
         W = poses @ np.stack([g.obb for g in objs])[None]  # OBB frames in the world, (n, objs, 4, 4)
         half = np.stack([g.half for g in objs])
         lb = np.maximum(
-            _obb_gap(W[:, mov], half[mov], W[:, world], half[world]),
-            _obb_gap(W[:, world], half[world], W[:, mov], half[mov]).transpose(0, 2, 1),
+            obb_gap(W[:, mov], half[mov], W[:, world], half[world]),
+            obb_gap(W[:, world], half[world], W[:, mov], half[mov]).transpose(0, 2, 1),
         )
         pair_m, pair_w = np.meshgrid(mov, world, indexing="ij")
         pair_m, pair_w = pair_m.ravel(), pair_w.ravel()
@@ -388,29 +264,10 @@ class CollisionChecker:
                 if lb[i, p] >= best:
                     break
                 ga, gb = objs[pair_m[p]], objs[pair_w[p]]
-                ga.fcl_obj.setTransform(_tf(poses[i, pair_m[p]]))
-                gb.fcl_obj.setTransform(_tf(poses[i, pair_w[p]]))
+                ga.fcl_obj.setTransform(fcl_transform(poses[i, pair_m[p]]))
+                gb.fcl_obj.setTransform(fcl_transform(poses[i, pair_w[p]]))
                 best = min(best, max(0.0, float(fcl.distance(ga.fcl_obj, gb.fcl_obj, req, fcl.DistanceResult()))))
                 if best <= 0.0:
                     break
             out[i] = best
         return out
-
-
-def _obb_gap(Wa: np.ndarray, half_a: np.ndarray, Wb: np.ndarray, half_b: np.ndarray) -> np.ndarray:
-    """``(n, A, B)`` separation (metres; negative: none) of OBBs A from OBBs B along B's face normals.
-
-    ``Wa`` ``(n, A, 4, 4)`` and ``Wb`` ``(n, B, 4, 4)`` are the OBB frames in the world,
-    ``half_*`` their half extents. A plane through a face of B with all of A
-    outside it separates them, so the largest such gap bounds their distance from below.
-    """
-    signs = np.array(np.meshgrid([-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0], indexing="ij")).reshape(3, -1).T  # (8, 3)
-    corners = Wa[:, :, None, :3, 3] + np.einsum("naij,aj,cj->naci", Wa[..., :3, :3], half_a, signs)  # (n, A, 8, 3)
-    rel = corners[:, :, None] - Wb[:, None, :, None, :3, 3]  # (n, A, B, 8, 3)
-    s = np.einsum("nabcj,nbjk->nabck", rel, Wb[..., :3, :3])  # along B's axes
-    h = half_b[None, None, :, :]
-    return np.max(np.maximum(s.min(axis=3) - h, -s.max(axis=3) - h), axis=3)
-
-
-def _tf(T: np.ndarray) -> fcl.Transform:
-    return fcl.Transform(np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]))

@@ -91,7 +91,7 @@ def test_batch_equals_single_and_clearance(robot: NextagePyBullet) -> None:
 def test_pruned_clearance_equals_every_pair_measured(robot: NextagePyBullet) -> None:
     import fcl
 
-    from asmteach.core.arm.collision import _tf
+    from asmteach.core.arm.collision_geometry import fcl_transform
 
     block = trimesh.creation.box((0.08, 0.06, 0.05))
     T = np.eye(4)
@@ -114,7 +114,7 @@ def test_pruned_clearance_equals_every_pair_measured(robot: NextagePyBullet) -> 
     brute = []
     for i in range(len(qs)):
         for k in mov + world:
-            objs[k].fcl_obj.setTransform(_tf(poses[i, k]))
+            objs[k].fcl_obj.setTransform(fcl_transform(poses[i, k]))
         brute.append(
             min(
                 max(0.0, fcl.distance(objs[a].fcl_obj, objs[b].fcl_obj, fcl.DistanceRequest(), fcl.DistanceResult()))
@@ -163,7 +163,7 @@ def test_batch_verdict_equals_every_candidate_pair_tested_with_fcl(robot: Nextag
     import fcl
     import pinocchio as pin
 
-    from asmteach.core.arm.collision import _tf
+    from asmteach.core.arm.collision_geometry import fcl_transform
 
     # a block and a held peg, so that boxes, cylinders and meshes all meet
     T = np.eye(4)
@@ -188,8 +188,8 @@ def test_batch_verdict_equals_every_candidate_pair_tested_with_fcl(robot: Nextag
     brute = np.zeros(len(qs), bool)
     for i in range(len(qs)):
         for a, b in zip(A, B, strict=True):
-            objs[a].fcl_obj.setTransform(_tf(poses[i, a]))
-            objs[b].fcl_obj.setTransform(_tf(poses[i, b]))
+            objs[a].fcl_obj.setTransform(fcl_transform(poses[i, a]))
+            objs[b].fcl_obj.setTransform(fcl_transform(poses[i, b]))
             if fcl.collide(objs[a].fcl_obj, objs[b].fcl_obj, fcl.CollisionRequest(), fcl.CollisionResult()) > 0:
                 brute[i] = True
                 break
