@@ -28,8 +28,9 @@ total           detect_total (file loading out)   total (view database prepared 
 ==============  ================================  ============================================
 
 Success for both: the rough pose within 5 mm / 5 deg of the truth, symmetry-aware
-(:func:`asmteach.core.symmetry.nearest_equivalent_error`). The reference always reports its best-fitness pose;
-ours reports ``found: false`` rather than a pose it cannot verify, so its *wrong* count is what precision means.
+(:func:`asmteach.core.pose_error.pose_error` with the part's symmetries). The reference always reports its
+best-fitness pose; ours reports ``found: false`` rather than a pose it cannot verify, so its *wrong* count is
+what precision means.
 Rows (one per scene, both detectors) go to ``benchmarks/out/detection_vs_pcl.csv``; the per-step medians and
 ratios are printed.
 """
@@ -120,7 +121,8 @@ def main() -> None:
     from asmteach.core.corpus import part_corpus
     from asmteach.core.parts import PartSpec, build_part
     from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
-    from asmteach.core.symmetry import equivalent_transforms, nearest_equivalent_error
+    from asmteach.core.pose_error import pose_error
+    from asmteach.core.symmetry import equivalent_transforms
     from asmteach.plugins.detectors.cvfh.corpus_measure import rest_poses, scene_pose
     from asmteach.plugins.detectors.cvfh.scenes import default_camera_pose, render_table_scene
 
@@ -181,7 +183,8 @@ def main() -> None:
                 for who, g in got.items():
                     mm = deg = None
                     if g["pose"] is not None:
-                        mm, deg = nearest_equivalent_error(np.asarray(g["pose"], float), T_true, syms)
+                        err = pose_error(np.asarray(g["pose"], float), T_true, right=syms)
+                        mm, deg = err.position_mm, err.angle_deg
                     ok = mm is not None and mm <= 5.0 and deg <= 5.0
                     row.update({f"{who}_found": g["found"], f"{who}_success": ok,
                                 f"{who}_wrong": g["found"] and not ok,

@@ -23,7 +23,6 @@ from __future__ import annotations
 from asmteach.core.symmetry.finder import SymmetryFinder, axis_rotations, symmetry_yaws
 from asmteach.core.symmetry.group import (
     equivalent_transforms,
-    nearest_equivalent_error,
     part_symmetries,
     principal_frame,
 )
@@ -32,7 +31,6 @@ __all__ = [
     "SymmetryFinder",
     "axis_rotations",
     "equivalent_transforms",
-    "nearest_equivalent_error",
     "part_symmetries",
     "principal_frame",
     "symmetry_yaws",

@@ -129,13 +129,3 @@ def equivalent_transforms(mesh: trimesh.Trimesh, com: np.ndarray, tol: float = 0
             turns = [geometry.from_rotation(R, com - R @ com) for R in axis_rotations(axis, np.radians(np.arange(360)))]
             return np.einsum("aij,bjk->abik", group, np.asarray(turns)).reshape(-1, 4, 4)
     return group
-
-
-def nearest_equivalent_error(T_est: np.ndarray, T_true: np.ndarray, syms: np.ndarray) -> tuple[float, float]:
-    """``(mm, deg)`` of ``T_est`` against the nearest ``T_true @ S`` (the same solid in the same place)."""
-    eq = np.einsum("ij,sjk->sik", T_true, syms)
-    pos = 1000.0 * np.linalg.norm(eq[:, :3, 3] - T_est[:3, 3], axis=1)
-    cos = (np.einsum("ij,sij->s", T_est[:3, :3], eq[:, :3, :3]) - 1.0) / 2.0
-    rot = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
-    i = int(np.argmin(pos + rot))
-    return float(pos[i]), float(rot[i])

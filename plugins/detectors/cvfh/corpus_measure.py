@@ -25,7 +25,8 @@ from asmteach.core.config import TableSettings
 from asmteach.core.hooks import hookimpl
 from asmteach.core.interfaces import Detector, PartModel
 from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
-from asmteach.core.symmetry import equivalent_transforms, nearest_equivalent_error
+from asmteach.core.pose_error import pose_error
+from asmteach.core.symmetry import equivalent_transforms
 from asmteach.plugins.detectors.cvfh.scenes import default_camera_pose, place_on_table, render_table_scene
 
 __all__ = ["AREA", "asmteach_measure_part", "rest_poses", "run_part", "scene_pose"]
@@ -79,11 +80,12 @@ def run_part(name: str, mesh: trimesh.Trimesh, part: PartModel, detector: Detect
         alts = [np.asarray(a["T_world_part"]) for a in det.details.get("ambiguous", [])]
         row["alternatives"] = len(alts)  # hull twins the view cannot tell apart, listed with the found pose
         row["truth_in_alternatives"] = any(
-            np.all(np.array(nearest_equivalent_error(T, T_true, syms)) <= (tol_mm, tol_deg)) for T in alts)
+            pose_error(T, T_true, right=syms).within(tol_mm, tol_deg) for T in alts)
         if det.found and det.rough is not None:
-            mm, deg = nearest_equivalent_error(det.rough, T_true, syms)
-            ok = mm <= tol_mm and deg <= tol_deg
-            row.update(pos_mm=round(mm, 2), rot_deg=round(deg, 2), success=ok, wrong_found=not ok)
+            err = pose_error(det.rough, T_true, right=syms)
+            ok = err.within(tol_mm, tol_deg)
+            row.update(pos_mm=round(err.position_mm, 2), rot_deg=round(err.angle_deg, 2), success=ok,
+                       wrong_found=not ok)
         rows.append(row)
     return rows
 

@@ -67,7 +67,8 @@ def test_every_corpus_part_gets_a_group_that_maps_its_surface_onto_itself() -> N
 
 
 def test_a_tube_is_equivalent_under_every_turn_about_its_axis_and_errors_see_it() -> None:
-    from asmteach.core.symmetry import equivalent_transforms, nearest_equivalent_error
+    from asmteach.core.pose_error import pose_error
+    from asmteach.core.symmetry import equivalent_transforms
 
     tube = corpus_part("tube_2").mesh
     com = tube.center_mass
@@ -75,7 +76,6 @@ def test_a_tube_is_equivalent_under_every_turn_about_its_axis_and_errors_see_it(
     assert len(eq) >= 360
     turned = geometry.from_rotation(geometry.rot_z(np.radians(13.0))[:3, :3], com - geometry.rot_z(
         np.radians(13.0))[:3, :3] @ com)
-    mm, deg = nearest_equivalent_error(turned, np.eye(4), eq)  # 13 deg about the axis: the same tube
-    assert mm < 0.01 and deg < 0.6
-    mm, deg = nearest_equivalent_error(geometry.from_rpy(0.2, 0, 0), np.eye(4), eq)  # tilted: not the same
-    assert deg > 5.0
+    err = pose_error(turned, np.eye(4), right=eq)  # 13 deg about the axis: the same tube
+    assert err.position_mm < 0.01 and err.angle_deg < 0.6
+    assert pose_error(geometry.from_rpy(0.2, 0, 0), np.eye(4), right=eq).angle_deg > 5.0  # tilted: not the same
