@@ -37,8 +37,9 @@ def _organized(seed: int = 0) -> tuple[np.ndarray, dict[str, np.ndarray]]:
 def test_pcd_round_trip(tmp_path: Path, data: str) -> None:
     pts, fields = _organized()
     T = geometry.from_rpy(0.1, -0.2, 0.3, [0.5, -0.25, 1.5])
-    path = clouds.write_pcd(tmp_path / f"c_{data}.pcd", pts, fields=fields, width=6, height=5, T_data_sensor=T,
-                            data=data)  # type: ignore[arg-type]
+    path = clouds.write_pcd(
+        tmp_path / f"c_{data}.pcd", pts, fields=fields, width=6, height=5, T_data_sensor=T, data=data
+    )  # type: ignore[arg-type]
     c = clouds.read_cloud(path)
     assert c.encoding == data and (c.width, c.height) == (6, 5) and c.organized
     assert c.points.shape == (30, 3) and c.grid().shape == (5, 6, 3)

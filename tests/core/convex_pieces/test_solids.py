@@ -59,8 +59,10 @@ def test_holed_block_pieces_are_the_solid_and_keep_the_hole_open() -> None:
 
 
 def test_cut_missing_a_piece_leaves_it_whole() -> None:
-    spec = SolidSpec(add=[Primitive(shape="box", size=[0.02, 0.02, 0.02])],
-                     subtract=[Primitive(shape="box", size=[0.01, 0.01, 0.01], pose={"xyz": [0.5, 0, 0]})])
+    spec = SolidSpec(
+        add=[Primitive(shape="box", size=[0.02, 0.02, 0.02])],
+        subtract=[Primitive(shape="box", size=[0.01, 0.01, 0.01], pose={"xyz": [0.5, 0, 0]})],
+    )
     pieces = solid_pieces(spec)
     assert len(pieces) == 1 and len(pieces[0]) == 8
 
@@ -105,7 +107,12 @@ def test_a_solid_part_takes_the_exact_route_and_a_convex_mesh_is_one_piece() -> 
     np.testing.assert_allclose(d.pieces[0].min(axis=0), solid.mesh.bounds[0], atol=1e-9)
     assert d.hausdorff < 1e-6 and d.protrusion < 1e-6 and d.volume_error < 1e-6
     mesh = trimesh.creation.icosphere(subdivisions=2, radius=0.02)
-    ball = PartModel(spec=PartSpec(name="ball", mesh="ball.stl"), mesh=mesh, mass=0.1,
-                     center_of_mass=np.zeros(3), source_hash=mesh_hash(mesh))
+    ball = PartModel(
+        spec=PartSpec(name="ball", mesh="ball.stl"),
+        mesh=mesh,
+        mass=0.1,
+        center_of_mass=np.zeros(3),
+        source_hash=mesh_hash(mesh),
+    )
     d = decompose(ball, DecompositionSettings(samples=2000), cache=False)
     assert d.method == "convex" and len(d.pieces) == 1 and d.protrusion < 1e-6

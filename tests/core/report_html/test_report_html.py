@@ -74,12 +74,25 @@ def _report(tmp_path, **overrides):
             part_b=_box("b"),
             T_A_B=geometry.from_xyz_rpy([0.01, 0.02, 0.03], np.radians([10.0, 0.0, 90.0])),
             v_a=[0.0, 0.0, -2.0],
-            evidence=TeachingEvidence(frames_total=30, frames_used=[0, 1, 2], residuals_px=[0.2, 0.4, 0.3],
-                                      spread_mm=0.12, insertion_source="demonstration", notes=["note <b>"]),
+            evidence=TeachingEvidence(
+                frames_total=30,
+                frames_used=[0, 1, 2],
+                residuals_px=[0.2, 0.4, 0.3],
+                spread_mm=0.12,
+                insertion_source="demonstration",
+                notes=["note <b>"],
+            ),
         ),
         detections=[
-            Detection(part="a", found=True, rough=rough, corrected=corrected, fitness=0.91, inlier_rmse=0.0012,
-                      details={"T_world_part_true": T_true.tolist()}),
+            Detection(
+                part="a",
+                found=True,
+                rough=rough,
+                corrected=corrected,
+                fitness=0.91,
+                inlier_rmse=0.0012,
+                details={"T_world_part_true": T_true.tolist()},
+            ),
             Detection(part="b", found=False, reason="no view matched <fitness 0.1>"),
         ],
         plan_stats={"grasps_tried": 12, "regrasps": 1, "path": ["p0", "p3"]},
@@ -107,12 +120,15 @@ def png(tmp_path):
 
 def test_report_html_is_self_contained_well_formed_and_escaped(tmp_path, png):
     (tmp_path / "report.json").write_text("{}")
-    report = _report(tmp_path, artefacts={
-        "error plot <1>": "figs/errors.png",
-        "report data": "report.json",
-        "escaped": "../outside.png",
-        "animation": "missing.gif",
-    })
+    report = _report(
+        tmp_path,
+        artefacts={
+            "error plot <1>": "figs/errors.png",
+            "report data": "report.json",
+            "escaped": "../outside.png",
+            "animation": "missing.gif",
+        },
+    )
     path = write_report_html(report, tmp_path)
     assert path == tmp_path / "report.html"
     text = path.read_text(encoding="utf-8")

@@ -112,7 +112,8 @@ def test_sideways_play_is_the_drawn_clearance(structures):
             for sign in (1.0, -1.0):
                 play = _play(pair, sign * np.asarray(axis))
                 assert abs(play - gs.clearance) < 0.05e-3, (
-                    f"{gs.name}: play {play * 1e3:.3f} mm along {sign:+.0f}{axis}, drawn {gs.clearance * 1e3:.2f} mm")
+                    f"{gs.name}: play {play * 1e3:.3f} mm along {sign:+.0f}{axis}, drawn {gs.clearance * 1e3:.2f} mm"
+                )
 
 
 def test_engaged_distance_is_the_clearance_where_only_the_sides_are_close(structures):

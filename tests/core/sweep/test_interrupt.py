@@ -99,8 +99,17 @@ def _interrupt_after(cmd, log, n_lines, *, signals):
 @pytest.mark.parametrize("workers", [2, 1], ids=["pool", "serial"])
 def test_ctrl_c_records_trials_in_flight_and_rerun_does_only_the_missing(sleepy_experiment, tmp_path, workers):
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "asmteach.core.cli", "sweep", str(sleepy_experiment), "--out", str(out),
-           "--workers", str(workers)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "asmteach.core.cli",
+        "sweep",
+        str(sleepy_experiment),
+        "--out",
+        str(out),
+        "--workers",
+        str(workers),
+    ]
     code, _, err = _interrupt_after(cmd, out / "trials.jsonl", 2, signals=1)
     assert code == 130
     assert "interrupted" in err and "Traceback" not in err

@@ -9,8 +9,15 @@ from asmteach.core.sweep import plot_axis_key, plot_columns, run_sweep, series_s
 
 
 def _row(point, seed, metrics=None, ok=True):
-    return {"trial_id": f"{point}-{seed}", "point": point, "seed": seed, "ok": ok, "metrics": metrics or {},
-            "error": None if ok else "boom", "seconds": 0.5}
+    return {
+        "trial_id": f"{point}-{seed}",
+        "point": point,
+        "seed": seed,
+        "ok": ok,
+        "metrics": metrics or {},
+        "error": None if ok else "boom",
+        "seconds": 0.5,
+    }
 
 
 def test_series_stats_are_median_and_quartiles_per_x():
@@ -60,8 +67,11 @@ def test_categorical_key_gives_box_plots():
     fig = summary_figure(rows)
     (ax,) = [a for a in fig.axes if a.get_visible()]
     assert [t.get_text() for t in ax.get_xticklabels()] == ["a", "b"]
-    medians = [ln.get_ydata()[0] for ln in ax.lines if ln.get_color() not in ("black", "k") and len(ln.get_ydata()) == 2
-               and ln.get_ydata()[0] == ln.get_ydata()[1]]
+    medians = [
+        ln.get_ydata()[0]
+        for ln in ax.lines
+        if ln.get_color() not in ("black", "k") and len(ln.get_ydata()) == 2 and ln.get_ydata()[0] == ln.get_ydata()[1]
+    ]
     assert 2.0 in medians and 12.0 in medians
 
 

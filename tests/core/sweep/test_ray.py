@@ -30,9 +30,7 @@ def test_ray_executor_matches_process_pool(tmp_path, toy_dist, monkeypatch):
     assert not ray.is_initialized()  # the instance the sweep started is shut down
 
     def key(rows):
-        return sorted(
-            (r["trial_id"], r["ok"], json.dumps(r["metrics"], sort_keys=True), r["error"]) for r in rows
-        )
+        return sorted((r["trial_id"], r["ok"], json.dumps(r["metrics"], sort_keys=True), r["error"]) for r in rows)
 
     assert len(ray_rows) == 6 and key(ray_rows) == key(pool_rows)
     assert sum(not r["ok"] for r in ray_rows) == 2  # failures are results under Ray too

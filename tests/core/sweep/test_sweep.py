@@ -73,8 +73,9 @@ def test_bad_grid_key_is_a_user_error(tmp_path, toy_dist):
 
 
 def test_summary_gives_a_yes_no_metric_as_a_rate_and_numbers_as_median_and_max():
-    rows = [{"point": {}, "seed": s, "ok": True, "metrics": {"success": s != 2, "error_mm": float(s)}}
-            for s in range(4)]
+    rows = [
+        {"point": {}, "seed": s, "ok": True, "metrics": {"success": s != 2, "error_mm": float(s)}} for s in range(4)
+    ]
     (rec,) = group_table(rows, [])
     assert rec["success_rate"] == 0.75 and "success_median" not in rec
     assert rec["error_mm_median"] == 1.5 and rec["error_mm_max"] == 3.0
@@ -83,7 +84,8 @@ def test_summary_gives_a_yes_no_metric_as_a_rate_and_numbers_as_median_and_max()
 def test_a_metric_named_seconds_is_kept_apart_from_the_trials_wall_time():
     """The assembly planning experiment reports its planning time as ``seconds``; the trial's wall time
     (planning plus set-up and the re-check) must not overwrite it in the summary."""
-    rows = [{"point": {}, "seed": s, "ok": True, "seconds": 10.0 + s, "metrics": {"seconds": 1.0 + s}}
-            for s in range(3)]
+    rows = [
+        {"point": {}, "seed": s, "ok": True, "seconds": 10.0 + s, "metrics": {"seconds": 1.0 + s}} for s in range(3)
+    ]
     (rec,) = group_table(rows, [])
     assert rec["seconds_median"] == 2.0 and rec["trial_seconds_median"] == 11.0
