@@ -40,6 +40,7 @@ from asmteach.core.io import write_text
 from asmteach.core.models import Placement, StrictModel, TablePlane
 from asmteach.core.parts import build_part, load_structure
 from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
+from asmteach.core.pose_error import pose_error
 from asmteach.core.sweep import Experiment, to_csv, to_markdown
 from asmteach.core.symmetry import part_symmetries
 from asmteach.plugins.detectors.cvfh.scenes import QUARTERS, default_camera_pose, place_on_table, render_table_scene
@@ -100,37 +101,31 @@ def pose_errors(
     com_part: np.ndarray,
     part_symmetry: list[np.ndarray] | None = None,
 ) -> dict[str, float]:
-    """Signed errors of ``T_est`` against the nearest symmetric equivalent of ``T_true``.
+    """Signed errors of ``T_est`` against the nearest symmetric equivalent of ``T_true``, as the experiment's columns.
 
-    Equivalents: the placement's symmetry yaws (about the vertical through the
-    centre of mass) and the part's own symmetry rotations (:func:`part_symmetries`).
-    Returns ``x, y, z`` (mm, world axes, part origin), ``roll, pitch, yaw``
+    Equivalents (:func:`asmteach.core.pose_error.pose_error`, nearest by mm + deg): the placement's symmetry
+    yaws (about the vertical through the centre of mass) and the part's own symmetry rotations
+    (:func:`part_symmetries`). Returns ``x, y, z`` (mm, world axes, part origin), ``roll, pitch, yaw``
     (deg, rpy of ``R_est R_true^T``), ``pos`` (mm) and ``rot`` (deg, geodesic).
     """
     c = geometry.transform_points(T_true, com_part[None])[0]
-    equivalents = []
-    for s in symmetry_yaws or [0.0]:
-        about = geometry.from_rotation(np.eye(3), c) @ geometry.rot_z(s) @ geometry.from_rotation(np.eye(3), -c)
-        equivalents.append(about @ T_true)
-    equivalents += [T_true @ S for S in part_symmetry or []]
-    best: dict[str, float] | None = None
-    for T_eq in equivalents:
-        rot = math.degrees(geometry.rotation_distance(T_est, T_eq))
-        if best is None or rot < best["rot"]:
-            dp = (T_est[:3, 3] - T_eq[:3, 3]) * 1000.0
-            rpy = np.degrees(geometry.rpy(T_est[:3, :3] @ T_eq[:3, :3].T))
-            best = {
-                "x": float(dp[0]),
-                "y": float(dp[1]),
-                "z": float(dp[2]),
-                "roll": float(rpy[0]),
-                "pitch": float(rpy[1]),
-                "yaw": float(rpy[2]),
-                "pos": float(np.linalg.norm(dp)),
-                "rot": rot,
-            }
-    assert best is not None
-    return best
+    # A turn about the vertical through the centre of mass, in the world frame: a left symmetry of T_true.
+    turns = [
+        geometry.from_rotation(np.eye(3), c) @ geometry.rot_z(-yaw) @ geometry.from_rotation(np.eye(3), -c)
+        for yaw in symmetry_yaws or [0.0]
+    ]
+    err = pose_error(T_est, T_true, left=turns, right=[np.eye(4), *(part_symmetry or [])])
+    (x, y, z), (roll, pitch, yaw) = err.dxyz_mm, err.drpy_deg
+    return {
+        "x": x,
+        "y": y,
+        "z": z,
+        "roll": roll,
+        "pitch": pitch,
+        "yaw": yaw,
+        "pos": err.position_mm,
+        "rot": err.angle_deg,
+    }
 
 
 class DetectionPrecision(Experiment):
@@ -140,11 +135,21 @@ class DetectionPrecision(Experiment):
 
     def check(self, params: DetectionParams) -> None:
         """The detector's and corrector's settings by their plugins' models, before any trial."""
-        check_plugin_settings("detectors", params.detector, params.detector_settings, name_key="params.detector",
-                              settings_key="params.detector_settings")
+        check_plugin_settings(
+            "detectors",
+            params.detector,
+            params.detector_settings,
+            name_key="params.detector",
+            settings_key="params.detector_settings",
+        )
         if params.corrector is not None:
-            check_plugin_settings("correctors", params.corrector, params.corrector_settings,
-                                  name_key="params.corrector", settings_key="params.corrector_settings")
+            check_plugin_settings(
+                "correctors",
+                params.corrector,
+                params.corrector_settings,
+                name_key="params.corrector",
+                settings_key="params.corrector_settings",
+            )
 
     def _pairs(self, params: DetectionParams) -> list[tuple[str, str, int]]:
         return [(str(self.path(pc.structure)), pc.part, pid) for pc in params.parts for pid in pc.placements]
