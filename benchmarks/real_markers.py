@@ -109,7 +109,8 @@ def marker_table(data: Path) -> list[str]:
         cells, errs = [], []
         for _name, task, T_true in tasks:
             est = fn(task)
-            e_t, e_r = est.errors(T_true)
+            err = est.errors(T_true)
+            e_t, e_r = err.position_mm, err.angle_deg
             errs.append((e_t, e_r))
             cells.append(f"{e_t:.2f} mm {e_r:.2f} deg ({len(est.markers_a)}+{len(est.markers_b)} markers, "
                          f"{est.rms_px:.2f} px)")

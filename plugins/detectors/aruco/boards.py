@@ -24,6 +24,7 @@ import numpy as np
 
 from asmteach.core import geometry
 from asmteach.core.models import AssemblyTask, CameraIntrinsics, MarkerSpec, PartSpec, Primitive, SolidSpec
+from asmteach.core.pose_error import PoseError, pose_error
 from asmteach.plugins.detectors.aruco.markers import get_dictionary, marker_corners_part
 
 if TYPE_CHECKING:
@@ -83,10 +84,9 @@ class SplitEstimate:
     rms_px: float
     """RMS reprojection error over both groups' corners, pixels."""
 
-    def errors(self, T_true: np.ndarray) -> tuple[float, float]:
-        """Translation (millimetres) and rotation (degrees) error against ``T_true``."""
-        return (geometry.translation_distance(self.T_A_B, T_true) * 1000.0,
-                float(np.degrees(geometry.rotation_distance(self.T_A_B, T_true))))
+    def errors(self, T_true: np.ndarray) -> PoseError:
+        """The error of ``T_A_B`` against ``T_true`` (:func:`asmteach.core.pose_error.pose_error`)."""
+        return pose_error(self.T_A_B, T_true)
 
 
 def teacher_split(image: np.ndarray, camera: CameraIntrinsics, task: AssemblyTask,
