@@ -15,6 +15,8 @@ Robot plugins build on it (the Nextage, ``urdf_arm``); it depends on the core on
 - :mod:`~asmteach.core.arm.sim`: the PyBullet world (robot, table, parts, trajectory execution);
 - :mod:`~asmteach.core.arm.sim_gripper`: :class:`GripperJoints` and gripping in that world;
 - :mod:`~asmteach.core.arm.sim_camera`: its RGB camera images;
-- :mod:`~asmteach.core.arm.plan_check`: the independent re-check of a plan;
+- :mod:`~asmteach.core.arm.plan_check`: the independent re-check of a plan (its rules and results);
+- :mod:`~asmteach.core.arm.plan_checker`: its replay in a PyBullet world (:func:`recheck_plan`);
+- :mod:`~asmteach.core.arm.link_spheres`: the re-check's bounding spheres and joint reach bounds;
 - :mod:`~asmteach.core.arm.urdf_check`: URDF parsing with errors that name the element.
 """
