@@ -45,6 +45,7 @@ import numpy as np
 
 from asmteach.core.interfaces import MotionPlanner, Obstacle, PartModel, Robot
 from asmteach.core.models import Grasp
+from asmteach.core.robot import PlanningScene
 from asmteach.plugins.planners.regrasp.feasibility import (
     ScreenSettings,
     evaluate_slot,
@@ -59,7 +60,7 @@ from asmteach.plugins.planners.regrasp.graph import (
     build_regrasp_graph,
     search_keyframes,
 )
-from asmteach.plugins.planners.regrasp.motions import MotionFailure, reset_world
+from asmteach.plugins.planners.regrasp.motions import MotionFailure, cleared_scene
 from asmteach.plugins.planners.regrasp.realise import PlaceGoal, Step, realise_keyframes
 from asmteach.plugins.planners.regrasp.settings import AssemblySettings
 from asmteach.plugins.planners.regrasp.slots import relocated_slots
@@ -85,6 +86,8 @@ class TransferResult:
     q_end: dict[str, np.ndarray] = field(default_factory=dict)
     keyframes: list[dict[str, Any]] = field(default_factory=list)
     layers: list[dict[str, Any]] = field(default_factory=list)
+    scene: PlanningScene | None = field(default=None, repr=False)
+    """The planning scene the transfer ends (or failed) with; the next part's planning starts from it."""
 
 
 def _screen_settings(settings: AssemblySettings) -> ScreenSettings:
@@ -95,6 +98,7 @@ def _screen_settings(settings: AssemblySettings) -> ScreenSettings:
 
 def feasible_grasps_at(
     robot: Robot,
+    scene: PlanningScene,
     part: PartModel,
     grasps: Sequence[Grasp],
     T_world_part: np.ndarray,
@@ -107,14 +111,14 @@ def feasible_grasps_at(
     The same test as a layer of the regrasp graph: screen, IK of the best
     ``settings.max_candidates``, collision of the arm with ``world`` (table
     named ``"table"`` and other obstacles, not this part), the pre-grasp pose
-    reachable. The robot's obstacles are left holding ``world`` and no arm
-    holds anything.
+    reachable; checked in ``scene`` with the obstacles of ``world`` and the
+    hands empty (the arms stay where ``scene`` has them).
     """
-    reset_world(robot, world)
+    scene = cleared_scene(scene, world)
     slot = PoseSlot("probe", "goal", np.asarray(T_world_part, float))
     screen = _screen_settings(settings)
     screened = screen_slot(slot, grasps, world_collider(world), robot.hand, screen, on_table)
-    return _grasp_ids([evaluate_slot(robot, slot, screened, list(robot.arms), settings=screen)])
+    return _grasp_ids([evaluate_slot(robot, scene, slot, screened, list(robot.arms), settings=screen)])
 
 
 def _grasp_dict(grasps: Sequence[Grasp]) -> dict[int, Grasp]:
@@ -123,6 +127,7 @@ def _grasp_dict(grasps: Sequence[Grasp]) -> dict[int, Grasp]:
 
 def plan_transfer(
     robot: Robot,
+    scene: PlanningScene,
     planner: MotionPlanner,
     part: PartModel,
     grasps: Sequence[Grasp],
@@ -145,6 +150,9 @@ def plan_transfer(
     (``settings.relocations``) while no path exists.
     Paths are untimed; see
     :func:`asmteach.plugins.planners.regrasp.plan_io.to_plan`.
+    Collisions are checked in scenes made from ``scene`` (the arms where it
+    has them); the result's :attr:`TransferResult.scene` is the one the
+    transfer ends with, and ``robot`` is never changed.
     """
     t0 = time.perf_counter()
     by_id = _grasp_dict(grasps)
@@ -155,12 +163,13 @@ def plan_transfer(
 
     def evaluate(slot: PoseSlot, on_table: bool = True, **kwargs: Any) -> GraspFeasibility:
         screened = screen_slot(slot, grasps, collider, robot.hand, screen, on_table)
-        return evaluate_slot(robot, slot, screened, arms, settings=screen, seeds=seeds, **kwargs)
+        return evaluate_slot(robot, scene, slot, screened, arms, settings=screen, seeds=seeds, **kwargs)
 
     start_slot = PoseSlot("start", "start", np.asarray(T_start, float))
 
     def start_and_goal() -> list[GraspFeasibility]:
-        reset_world(robot, world)
+        nonlocal scene
+        scene = cleared_scene(scene, world)
         start = evaluate(start_slot)
         return [start, evaluate(goal.slot, goal.on_table, prefer=_grasp_ids([start]))]
 
@@ -181,11 +190,14 @@ def plan_transfer(
     def middle_layers(slots: list[PoseSlot], prefer: set[int]) -> list[GraspFeasibility]:
         screens = [screen_slot(slot, grasps, collider, robot.hand, screen) for slot in slots]
         total = Counter(g.id for passed, _ in screens for g in passed)
-        reset_world(robot, world)  # a failed realisation may have left other obstacles or a held part
+        nonlocal scene
+        scene = cleared_scene(scene, world)  # a failed realisation may have left other obstacles or a held part
         shared = [
             {gid: n - (gid in {g.id for g in passed}) for gid, n in total.items()} for passed, _ in screens
         ]  # per slot: the other slots passing each grasp
-        return evaluate_slots(robot, slots, screens, arms, settings=screen, prefer=prefer, shared=shared, seeds=seeds)
+        return evaluate_slots(
+            robot, scene, slots, screens, arms, settings=screen, prefer=prefer, shared=shared, seeds=seeds
+        )
 
     banned: list[tuple[Any, Any]] = []
     last_reason: str | None = None
@@ -278,15 +290,18 @@ def plan_transfer(
                 reason=f"{reason}; {_time_spent(stats, t0)}",
                 stats=_rounded(stats),
                 layers=[f.counts() for f in layers],
+                scene=scene,
             )
         attempts += 1
         tm = time.perf_counter()
         try:
-            steps, q_end, keyframes, min_clear = realise_keyframes(
-                robot, planner, part, by_id, G, search, goal, world, q_now, settings
+            steps, q_end, keyframes, min_clear, scene = realise_keyframes(
+                robot, scene, planner, part, by_id, G, search, goal, world, q_now, settings
             )
         except MotionFailure as fail:
             stats["motion_seconds"] += time.perf_counter() - tm
+            if fail.scene is not None:
+                scene = fail.scene
             banned.append(fail.edge)
             if fail.node is not None and fail.node in G:
                 banned += list(G.edges(fail.node))
@@ -303,6 +318,7 @@ def plan_transfer(
                     stats=_rounded(stats),
                     reason=f"{attempts} keyframe sequences tried (max_attempts); last failure: {last_reason}; "
                     f"{_time_spent(stats, t0)}",
+                    scene=scene,
                 )
             if time.perf_counter() - t0 > settings.time_budget:
                 stats["wall_clock_cuts"].append(f"time budget of {settings.time_budget:.0f} s")
@@ -313,6 +329,7 @@ def plan_transfer(
                     stats=_rounded(stats),
                     reason=f"time budget of {settings.time_budget:.0f} s (wall clock) spent after {attempts} "
                     f"keyframe sequences; last failure: {last_reason}; {_time_spent(stats, t0)}",
+                    scene=scene,
                 )
             continue
         stats["motion_seconds"] += time.perf_counter() - tm
@@ -320,7 +337,14 @@ def plan_transfer(
             regrasps=search.regrasps, attempts=attempts, seconds=time.perf_counter() - t0, min_clearance_m=min_clear
         )
         return TransferResult(
-            True, steps=steps, search=search, graph=G, stats=_rounded(stats), q_end=q_end, keyframes=keyframes
+            True,
+            steps=steps,
+            search=search,
+            graph=G,
+            stats=_rounded(stats),
+            q_end=q_end,
+            keyframes=keyframes,
+            scene=scene,
         )
 
 

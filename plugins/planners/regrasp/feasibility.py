@@ -30,6 +30,7 @@ from asmteach.core.geometry import compose, from_rotation
 from asmteach.core.hand_geometry import MeshCollider, hand_boxes
 from asmteach.core.interfaces import Obstacle, Robot
 from asmteach.core.models import Grasp, HandSpec
+from asmteach.core.robot import PlanningScene
 from asmteach.plugins.planners.regrasp.graph import GraspFeasibility, PoseSlot, Rejected, Rejection
 
 __all__ = [
@@ -111,6 +112,7 @@ def screen_slot(
 
 def evaluate_slot(
     robot: Robot,
+    scene: PlanningScene,
     slot: PoseSlot,
     screened: tuple[list[Grasp], dict[int, str]],
     arms: Sequence[str],
@@ -123,6 +125,7 @@ def evaluate_slot(
     """:func:`evaluate_slots` of one slot."""
     return evaluate_slots(
         robot,
+        scene,
         [slot],
         [screened],
         arms,
@@ -135,6 +138,7 @@ def evaluate_slot(
 
 def evaluate_slots(
     robot: Robot,
+    scene: PlanningScene,
     slots: Sequence[PoseSlot],
     screened: Sequence[tuple[list[Grasp], dict[int, str]]],
     arms: Sequence[str],
@@ -146,8 +150,9 @@ def evaluate_slots(
 ) -> list[GraspFeasibility]:
     """IK and collision of the best screened grasps (:func:`screen_slot`) with the part at each slot.
 
-    The robot's obstacles must already hold the world of these slots (the
-    other part; the robot knows the table) and nothing may be held; the part
+    ``robot`` solves the IK; collisions are checked in ``scene``, whose
+    obstacles must hold the world of these slots (the other part; the robot
+    knows the table) and whose hands must be empty; the part
     itself is not an obstacle, since the fingers touch it by design. Every arm is
     tried and each that works is kept. ``prefer`` lists grasp ids (not
     variants) to try before the others; ``shared[k]`` counts, per grasp id, the
@@ -184,7 +189,7 @@ def evaluate_slots(
                 good.append(i)
             else:
                 out[jobs[i][0]].rejected[keys[i]] = Rejection(Rejected.NO_IK, r.reason or "")
-        good = _collision_free(robot, arm, good, [res[i].q for i in good], out, jobs, keys, pregrasp=False)
+        good = _collision_free(scene, arm, good, [res[i].q for i in good], out, jobs, keys, pregrasp=False)
         if not good:
             continue
         T_eff = np.stack([T_tcp[i] @ FLIP_Z if res[i].flipped else T_tcp[i] for i in good])
@@ -197,7 +202,7 @@ def evaluate_slots(
             else:
                 reach.append((i, p.q))
         clear = _collision_free(
-            robot, arm, [i for i, _ in reach], [q for _, q in reach], out, jobs, keys, pregrasp=True
+            scene, arm, [i for i, _ in reach], [q for _, q in reach], out, jobs, keys, pregrasp=True
         )
         for i in clear:
             out[jobs[i][0]].solutions[keys[i]] = np.asarray(res[i].q, float)
@@ -205,7 +210,7 @@ def evaluate_slots(
 
 
 def _collision_free(
-    robot: Robot,
+    scene: PlanningScene,
     arm: str,
     idx: list[int],
     qs: list[np.ndarray],
@@ -214,16 +219,16 @@ def _collision_free(
     keys: list[tuple[int, str]],
     pregrasp: bool,
 ) -> list[int]:
-    """The entries of ``idx`` whose configuration is free; the others get a collision rejection (with the
+    """The entries of ``idx`` whose configuration is free in ``scene``; the others get a collision rejection (with the
     colliding pairs at the grasp itself, which also tell whether the table is one of them)."""
     if not idx:
         return []
-    hits = np.asarray(robot.in_collision(arm, np.asarray(qs, float)), bool)
+    hits = np.asarray(scene.in_collision(arm, np.asarray(qs, float)), bool)
     bad = [k for k, hit in enumerate(hits) if hit]
     if pregrasp:
         rejections = [Rejection(Rejected.PREGRASP_COLLISION)] * len(bad)
     else:
-        reports = robot.collision_reports(arm, np.asarray([qs[k] for k in bad], float)) if bad else []
+        reports = scene.collision_reports(arm, np.asarray([qs[k] for k in bad], float)) if bad else []
         rejections = [
             Rejection(
                 Rejected.ARM_COLLISION,

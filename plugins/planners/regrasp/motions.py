@@ -4,6 +4,9 @@ Each raises :class:`MotionFailure` naming the regrasp-graph edge to ban (and,
 when no path through it can succeed, the node) so the graph can be searched
 again; a free motion's failure is read from the planner's
 :class:`~asmteach.core.failures.FailureKind`, never from its reason string.
+Collisions are checked on the :class:`~asmteach.core.robot.PlanningScene`
+value each motion is given (the robot only lends its kinematics); the motion
+planner gets callables that ask that scene.
 
 Frames: ``T_world_*`` 4x4 in metres; joint paths in radians.
 """
@@ -17,6 +20,7 @@ import numpy as np
 
 from asmteach.core.failures import FailureKind
 from asmteach.core.interfaces import MotionPlanner, Obstacle, Robot
+from asmteach.core.robot import PlanningScene
 from asmteach.core.trajectory.batch import batched, inverse_clearance_cost
 from asmteach.core.trajectory.interpolate import densify
 from asmteach.plugins.planners.regrasp.settings import AssemblySettings
@@ -25,10 +29,11 @@ __all__ = [
     "Checker",
     "MotionFailure",
     "cartesian_path",
+    "cleared_scene",
+    "first_hit",
     "free_motion",
-    "reset_world",
-    "set_world",
     "straight_line",
+    "world_scene",
 ]
 
 
@@ -41,6 +46,8 @@ class MotionFailure(Exception):
         self.reason = reason
         self.node = node
         self.timed_out = timed_out  # a wall-clock limit, not the search, ended it: the result depends on the load
+        self.scene: PlanningScene | None = None
+        """The scene the realisation had reached when it failed (set by the realisation)."""
 
 
 def cartesian_path(
@@ -63,48 +70,51 @@ def cartesian_path(
     return np.asarray(path), None
 
 
-def set_world(robot: Robot, world: Sequence[Obstacle], *extra: Obstacle) -> None:
-    """The robot's obstacles: ``world`` and ``extra`` without the table, which the robot models itself."""
-    robot.set_obstacles([o for o in world if o.name != "table"] + list(extra))
+def world_scene(scene: PlanningScene, world: Sequence[Obstacle], *extra: Obstacle) -> PlanningScene:
+    """``scene`` with the obstacles ``world`` and ``extra`` without the table, which the robot models itself."""
+    return scene.with_obstacles([o for o in world if o.name != "table"] + list(extra))
 
 
-def reset_world(robot: Robot, world: Sequence[Obstacle]) -> None:
-    """The robot's obstacles hold ``world`` (:func:`set_world`) and no arm holds anything."""
-    set_world(robot, world)
-    for arm in robot.arms:
-        robot.attach(arm, None)
+def cleared_scene(scene: PlanningScene, world: Sequence[Obstacle]) -> PlanningScene:
+    """``scene`` with the obstacles of ``world`` (:func:`world_scene`) and no arm holding anything."""
+    scene = world_scene(scene, world)
+    for arm in list(scene.attached):
+        scene = scene.with_attached(arm, None)
+    return scene
 
 
 class Checker:
-    """Collision checks of one arm's paths against the robot's current world.
+    """Collision checks of one arm's configurations in one planning scene.
 
     ``valid`` and ``cost`` answer one configuration and, through ``.batch``,
     many at once (the robot's checker is ~25x cheaper per configuration in a
     batch; T-RRT checks whole edges that way).
     """
 
-    def __init__(self, robot: Robot, arm: str) -> None:
-        self.robot, self.arm = robot, arm
+    def __init__(self, scene: PlanningScene, arm: str) -> None:
         self.valid = batched(
-            lambda q: not bool(robot.in_collision(arm, np.asarray(q, float)[None, :])[0]),
-            lambda qs: ~np.asarray(robot.in_collision(arm, qs), bool),
+            lambda q: not bool(scene.in_collision(arm, np.asarray(q, float)[None, :])[0]),
+            lambda qs: ~np.asarray(scene.in_collision(arm, qs), bool),
         )
         # T-RRT climbs this cost map: high within a few mm of obstacles, flat beyond 10 cm (metres),
         # so clearances beyond 10 cm need not be measured exactly.
         cap = 0.10
         clearance = batched(
-            lambda q: float(robot.clearance(arm, np.asarray(q, float)[None, :], upto=cap)[0]),
-            lambda qs: np.asarray(robot.clearance(arm, qs, upto=cap), float),
+            lambda q: float(scene.clearance(arm, np.asarray(q, float)[None, :], upto=cap)[0]),
+            lambda qs: np.asarray(scene.clearance(arm, qs, upto=cap), float),
         )
         self.cost = inverse_clearance_cost(clearance, floor=0.005, cap=cap)
 
-    def first_hit(self, path: np.ndarray, ignore: Sequence[str] = ()) -> int | None:
-        hits = self.robot.in_collision(self.arm, np.asarray(path, float), ignore=ignore)
-        return int(np.argmax(hits)) if np.any(hits) else None
+
+def first_hit(scene: PlanningScene, arm: str, path: np.ndarray, ignore: Sequence[str] = ()) -> int | None:
+    """Index of the first configuration of ``path`` ``(n, dof)`` in collision in ``scene``, or ``None``."""
+    hits = scene.in_collision(arm, np.asarray(path, float), ignore=ignore)
+    return int(np.argmax(hits)) if np.any(hits) else None
 
 
 def free_motion(
     robot: Robot,
+    scene: PlanningScene,
     planner: MotionPlanner,
     arm: str,
     q_a: np.ndarray,
@@ -114,9 +124,9 @@ def free_motion(
     what: str,
     clearances: list[float],
 ) -> np.ndarray:
-    """A collision-free joint path from the motion planner, cost = inverse clearance;
+    """A collision-free joint path in ``scene`` from the motion planner, cost = inverse clearance;
     its minimum clearance (metres) is appended to ``clearances``."""
-    chk = Checker(robot, arm)
+    chk = Checker(scene, arm)
     lo, hi = robot.joint_limits(arm)
     res = planner.plan(
         np.asarray(q_a, float),
@@ -134,13 +144,13 @@ def free_motion(
         raise MotionFailure(edge, f"{what}: {res.reason}", node=bad_goal, timed_out=res.kind is FailureKind.TIMEOUT)
     path = np.asarray(res.path, float)
     # clearance of the free motion in the world it was planned in, every 0.05 rad (for the statistics)
-    clearances.append(float(np.min(robot.clearance(arm, densify(path, 0.05)))))
+    clearances.append(float(np.min(scene.clearance(arm, densify(path, 0.05)))))
     return path
 
 
 def straight_line(
     robot: Robot,
-    chk: Checker,
+    scene: PlanningScene,
     arm: str,
     q_from: np.ndarray,
     T_to: np.ndarray,
@@ -150,13 +160,14 @@ def straight_line(
     ignore: Sequence[str] = (),
     node: Any | None = None,
 ) -> np.ndarray:
-    """A straight TCP line; on failure ``node``, the grasp at the slot the line belongs to, is banned whole."""
+    """A straight TCP line, collision-free in ``scene`` but for ``ignore``; on failure ``node``, the grasp at the
+    slot the line belongs to, is banned whole."""
     path, why = cartesian_path(robot, arm, np.asarray(q_from, float), T_to, settings.cartesian_step)
     if path is None:
         raise MotionFailure(edge, f"{what}: {why}", node=node)
-    hit = chk.first_hit(path, ignore=ignore)
+    hit = first_hit(scene, arm, path, ignore=ignore)
     if hit is not None:
-        pairs = robot.collision_report(arm, path[hit])
+        pairs = scene.collision_report(arm, path[hit])
         who = ", ".join(f"{a}/{b}" for a, b in pairs[:2]) or "unknown pair"
         raise MotionFailure(edge, f"{what}: collision at step {hit} ({who})", node=node)
     return path

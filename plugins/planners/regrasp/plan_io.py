@@ -34,6 +34,7 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Obstacle, Robot
 from asmteach.core.io import atomic_path
 from asmteach.core.models import Plan, PlanSegment
+from asmteach.core.robot import PlanningScene
 from asmteach.core.trajectory.blended import DEFAULT_DEVIATION, BlendReport, time_optimal
 from asmteach.core.trajectory.timing import segment_profile, time_parametrize, to_trajectory
 from asmteach.plugins.planners.regrasp.graph import GOAL, START
@@ -54,11 +55,15 @@ insertion (2.2 cm/s) plus a little, so the peg meets the hole as gently as it al
 _END_SLOTS = ("start", "goal", "assembled")  # slot names that are not an intermediate placement
 
 
-def table_obstacle(robot: Robot, height: float) -> Obstacle:
-    """The table top as a 5 cm slab whose upper face is at ``height`` (world z, metres)."""
-    st = getattr(robot, "settings", None)
-    center = getattr(st, "table_center", (0.45, 0.0))
-    size = getattr(st, "table_size", (0.8, 1.2))
+def table_obstacle(scene: PlanningScene, height: float) -> Obstacle:
+    """The table top as a 5 cm slab whose upper face is at ``height`` (world z, metres), under the footprint
+    (centre x, y and size) of the scene's own table; a 0.8 x 1.2 m table centred at (0.45, 0) m when the scene
+    models none."""
+    table = scene.table
+    if table is None:
+        center, size = (0.45, 0.0), (0.8, 1.2)
+    else:
+        center, size = table.T_world[:2, 3], table.mesh.extents[:2]
     T = np.eye(4)
     T[:3, 3] = [center[0], center[1], height - 0.025]
     return Obstacle("table", trimesh.creation.box(extents=[size[0], size[1], 0.05]), T)

@@ -11,13 +11,16 @@ Part B is picked, carried to the pre-assembly pose (retracted along ``-v_a``)
 and inserted along ``v_a`` in a straight line; only then is it released.
 While A moves, B is an obstacle where it lies; while B moves, A is one at its
 goal.
+
+Planning starts from the robot's planning scene (:attr:`Robot.scene`: where
+the arms are) and checks collisions on scene values made from it; it never
+changes the robot.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +35,7 @@ from asmteach.core.interfaces import (
 )
 from asmteach.core.models import Plan
 from asmteach.core.rests.placements import compute_placements
+from asmteach.core.robot import PlanningScene
 from asmteach.plugins.planners.regrasp.assembly import TransferResult, feasible_grasps_at, plan_transfer
 from asmteach.plugins.planners.regrasp.goals import AssemblyGoal, assembly_goal_at, ranked_assembly_goals
 from asmteach.plugins.planners.regrasp.graph import PoseSlot
@@ -57,21 +61,12 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         *,
         progress: Callable[[str], None] | None = None,
     ) -> AssemblyResult:
-        with _arms_kept(robot):
-            return self._plan(problem, robot, motion_planner, progress)
-
-    def _plan(
-        self,
-        problem: AssemblyProblem,
-        robot: Robot,
-        motion_planner: MotionPlanner,
-        progress: Callable[[str], None] | None,
-    ) -> AssemblyResult:
         s = self.settings
         t0 = time.perf_counter()
         a, b, h = problem.part_a, problem.part_b, problem.table.height
-        table = table_obstacle(robot, h)
-        goal, goal_grasps = self._choose_goal(problem, robot, table, progress)
+        scene = robot.scene
+        table = table_obstacle(scene, h)
+        goal, goal_grasps = self._choose_goal(problem, robot, scene, table, progress)
         q_home = {arm: robot.home(arm) for arm in robot.arms}
         details: dict = {
             "goal_placement_a": goal.placement_id,
@@ -87,6 +82,7 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         start_a = problem.T_world_a[:3, 3]
         res_a = plan_transfer(
             robot,
+            scene,
             motion_planner,
             a,
             problem.grasps_a,
@@ -108,7 +104,8 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         details["a"] = res_a
         if not res_a.success:
             return self._fail(result, res_a, f"part A ({a.name})", t0, robot)
-        res_b = self._plan_b(problem, goal, robot, motion_planner, res_a.q_end, progress)
+        assert res_a.scene is not None  # plan_transfer always says where it ended
+        res_b = self._plan_b(problem, goal, robot, res_a.scene, motion_planner, res_a.q_end, progress)
         details["b"] = res_b
         if not res_b.success:
             result.plan = self._timed(robot, [("A", a.name, res_a)], t0)
@@ -118,10 +115,15 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         return result
 
     def _choose_goal(
-        self, problem: AssemblyProblem, robot: Robot, table: Obstacle, progress: Callable[[str], None] | None
+        self,
+        problem: AssemblyProblem,
+        robot: Robot,
+        scene: PlanningScene,
+        table: Obstacle,
+        progress: Callable[[str], None] | None,
     ) -> tuple[AssemblyGoal, int]:
         """A's goal: the best ranked at which ``min_goal_grasps`` of B's grasps are feasible when assembled (else
-        the one with the most), and that number."""
+        the one with the most; checked in ``scene`` with the arms where it has them), and that number."""
         s, a, b, h = self.settings, problem.part_a, problem.part_b, problem.table.height
         goals = ranked_assembly_goals(
             a,
@@ -140,7 +142,13 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         for goal in goals:
             n = len(
                 feasible_grasps_at(
-                    robot, b, problem.grasps_b, goal.T_world_b, [table, Obstacle(a.name, a.mesh, goal.T_world_a)], s
+                    robot,
+                    scene,
+                    b,
+                    problem.grasps_b,
+                    goal.T_world_b,
+                    [table, Obstacle(a.name, a.mesh, goal.T_world_a)],
+                    s,
                 )
             )
             if best is None or n > best[1]:
@@ -165,7 +173,8 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         T_world_a: np.ndarray,
         progress: Callable[[str], None] | None = None,
     ) -> AssemblyResult:
-        """B's segments only, into A standing at ``T_world_a`` (seen there); the arms start where they are now."""
+        """B's segments only, into A standing at ``T_world_a`` (seen there); the arms start where the robot's
+        scene has them (where the world's arms are after a run's executed segments)."""
         s = self.settings
         t0 = time.perf_counter()
         goal = assembly_goal_at(
@@ -184,8 +193,9 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
             T_world_b_goal=goal.T_world_b,
             details={"v_world": goal.v_world.tolist()},
         )
-        with _arms_kept(robot) as q_now:
-            res_b = self._plan_b(problem, goal, robot, motion_planner, q_now, progress)
+        scene = robot.scene
+        q_now = {arm: np.array(scene.configuration[arm], dtype=float) for arm in robot.arms}
+        res_b = self._plan_b(problem, goal, robot, scene, motion_planner, q_now, progress)
         result.details["b"] = res_b
         if not res_b.success:
             return self._fail(result, res_b, f"part B ({problem.part_b.name})", t0, robot)
@@ -198,18 +208,20 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         problem: AssemblyProblem,
         goal: AssemblyGoal,
         robot: Robot,
+        scene: PlanningScene,
         motion_planner: MotionPlanner,
         q_now: dict[str, np.ndarray],
         progress: Callable[[str], None] | None,
     ) -> TransferResult:
-        """B from where it lies to the assembled pose; A stands at its goal, B may touch it (and the table) only on
-        the insertion."""
+        """B from where it lies to the assembled pose, planned from ``scene``; A stands at its goal, B may touch it
+        (and the table) only on the insertion."""
         s, a, b, h = self.settings, problem.part_a, problem.part_b, problem.table.height
-        world_b = [table_obstacle(robot, h), Obstacle(a.name, a.mesh, goal.T_world_a)]
+        world_b = [table_obstacle(scene, h), Obstacle(a.name, a.mesh, goal.T_world_a)]
         start_b = problem.T_world_b[:3, 3]
         back = goal.T_world_b_pre[:3, 3] - goal.T_world_b[:3, 3]  # the retraction, along -v_world
         return plan_transfer(
             robot,
+            scene,
             motion_planner,
             b,
             problem.grasps_b,
@@ -278,14 +290,3 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
                     title=f"regrasp graph of part {key.upper()}",
                 )
         return out
-
-
-@contextmanager
-def _arms_kept(robot: Robot) -> Iterator[dict[str, np.ndarray]]:
-    """Yields the arms' configurations now (radians) and puts them back afterwards: planning moves them around."""
-    q_now = {arm: robot.current(arm) for arm in robot.arms}
-    try:
-        yield q_now
-    finally:
-        for arm, q in q_now.items():
-            robot.set_configuration(arm, q)

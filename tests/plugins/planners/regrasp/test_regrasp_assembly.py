@@ -180,13 +180,12 @@ def test_peg_in_hole_plan_is_collision_free_and_ends_assembled(peg_in_hole_plan)
     assert np.linalg.norm(grasp_at_goal[:3, 3]) < 0.1
     np.testing.assert_allclose(T_b_goal, res.T_world_a_goal @ task.T_A_B, atol=1e-9)
     # free motions re-checked densely against the world with no part held (home moves at the end)
-    robot.set_obstacles([])
-    robot.attach("left", None)
+    empty = robot.scene.with_obstacles([]).with_attached("left", None)
     home_moves = [s for s in plan.segments if s.label.endswith("home") and s.trajectory is not None]
     assert home_moves
     for seg in home_moves:
         dense = densify(np.asarray(seg.trajectory.positions), 0.01)
-        assert not robot.in_collision(seg.trajectory.arm, dense).any()
+        assert not empty.in_collision(seg.trajectory.arm, dense).any()
 
 
 @pytest.mark.slow
@@ -211,7 +210,9 @@ def test_plan_insertion_aims_b_at_an_a_seen_off_its_goal(peg_in_hole_plan) -> No
     planner = registry.create("assembly_planners", "regrasp", {}, seed=0)
     motion = registry.create("motion_planners", "rrtconnect", {}, seed=0)
     q_now = {arm: robot.current(arm) for arm in robot.arms}
+    before = robot.scene
     res = planner.plan_insertion(problem, robot, motion, T_world_a=T_seen)
+    assert robot.scene is before  # planning makes scene values of its own and leaves the robot's alone
     assert res.success, res.reason
     assert {seg.part for seg in res.plan.segments} == {p.b.name}
     first = next(s for s in res.plan.segments if s.trajectory is not None).trajectory
@@ -269,7 +270,7 @@ def test_a_slider_whose_upright_goal_leaves_one_grasp_is_assembled_with_a_lying_
         task = problem.task
         motion = registry.create("motion_planners", "trrt", {}, seed=0)
         upright = registry.create("assembly_planners", "regrasp", {"min_goal_grasps": 0}, seed=0)
-        chosen = upright._choose_goal(problem, robot, table_obstacle(robot, 0.0), None)[0]
+        chosen = upright._choose_goal(problem, robot, robot.scene, table_obstacle(robot.scene, 0.0), None)[0]
         np.testing.assert_array_equal(chosen.v_world, [0.0, 0.0, -1.0])  # unchecked: the most vertical
         messages: list[str] = []
         res = registry.create("assembly_planners", "regrasp", {}, seed=0).plan(

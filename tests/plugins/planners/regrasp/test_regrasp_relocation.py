@@ -23,6 +23,7 @@ from asmteach.core.interfaces import IKResult, MotionResult, Obstacle, PartModel
 from asmteach.core.models import Grasp, HandSpec, PartSpec, Primitive, SolidSpec
 from asmteach.core.parts import build_part
 from asmteach.core.rests.placements import compute_placements
+from asmteach.core.robot import PlanningScene
 from asmteach.plugins.planners.regrasp.assembly import plan_transfer
 from asmteach.plugins.planners.regrasp.graph import PoseSlot
 from asmteach.plugins.planners.regrasp.realise import PlaceGoal
@@ -41,12 +42,23 @@ START_XY = np.array([0.30, 0.30])
 GOAL_XY = np.array([0.40, 0.0])
 
 
+class NothingCollides(PlanningScene):
+    """A scene in which nothing collides and everything is 1 m clear."""
+
+    def in_collision(self, arm: str, qs: np.ndarray, *, ignore: Sequence[str] = ()) -> np.ndarray:
+        return np.zeros(len(np.atleast_2d(qs)), bool)
+
+    def clearance(self, arm: str, qs: np.ndarray, upto: float = np.inf) -> np.ndarray:
+        return np.full(len(np.atleast_2d(qs)), min(1.0, upto))
+
+
 class EdgeOfReachArm(Robot):
     """One arm; configuration = TCP position and rotation vector. IK needs the approach (TCP +z) at least
     0.3 down (cosine), and at least 0.95 down where |y| > 0.2 m; nothing collides."""
 
     def __init__(self) -> None:
         super().__init__({})
+        self.scene = NothingCollides({"left": self.home("left")})
 
     arms = property(lambda self: ["left"])
     hand = property(lambda self: HAND)
@@ -69,26 +81,6 @@ class EdgeOfReachArm(Robot):
             return IKResult(False, None, reason="wrist limit")
         q = np.concatenate([T_world_tcp[:3, 3], Rotation.from_matrix(T_world_tcp[:3, :3]).as_rotvec()])
         return IKResult(True, q, 0.0, 0.0)
-
-    def set_obstacles(self, obstacles: Sequence[Obstacle]) -> None:
-        pass
-
-    def attach(
-        self, arm: str, part: PartModel | None, T_tcp_part: np.ndarray | None = None, *, width: float | None = None
-    ) -> None:
-        pass
-
-    def set_configuration(self, arm: str, q: np.ndarray) -> None:
-        pass
-
-    def in_collision(self, arm: str, qs: np.ndarray, *, ignore: Sequence[str] = ()) -> np.ndarray:
-        return np.zeros(len(np.atleast_2d(qs)), bool)
-
-    def clearance(self, arm: str, qs: np.ndarray, upto: float = np.inf) -> np.ndarray:
-        return np.full(len(np.atleast_2d(qs)), min(1.0, upto))
-
-    def collision_report(self, arm: str, q: np.ndarray) -> list[tuple[str, str]]:
-        return []
 
 
 class StraightLine:
@@ -135,8 +127,10 @@ def transfer(
         return placement_slots(compute_placements(peg), T_start[:2, 3], 0.0, settings, every=every)
 
     robot = EdgeOfReachArm()
+    before = robot.scene
     res = plan_transfer(
         robot,
+        robot.scene,
         StraightLine(),
         peg,
         GRASPS,
@@ -147,6 +141,8 @@ def transfer(
         q_now={"left": robot.home("left")},
         settings=settings,
     )
+    assert robot.scene is before and before.obstacles == () and not before.attached  # the robot's is left alone
+    assert res.scene is not None and not res.scene.attached  # the scene the transfer ends with: hands empty
     return res, calls
 
 
@@ -225,6 +221,7 @@ def test_re_searches_are_counted_and_wall_clock_cuts_reported(peg) -> None:
     robot = EdgeOfReachArm()
     res = plan_transfer(
         robot,
+        robot.scene,
         TimesOut(),
         peg,
         GRASPS,
