@@ -70,8 +70,9 @@ class GraspHold(Experiment):
 
     def check(self, params: GraspHoldParams) -> None:
         """The planner's settings by the antipodal planner's model, before any trial."""
-        check_plugin_settings("grasp_planners", "antipodal", params.planner, name_key="params",
-                              settings_key="params.planner")
+        check_plugin_settings(
+            "grasp_planners", "antipodal", params.planner, name_key="params", settings_key="params.planner"
+        )
 
     def run_trial(self, params: GraspHoldParams, seed: int, workdir: Path) -> dict[str, Any]:
         folders = [self.path(f) for f in params.library]
