@@ -35,14 +35,7 @@ import numpy as np
 from pydantic import BaseModel
 
 from asmteach.core import registry
-from asmteach.core.config import (
-    ROLE_OF_KEY,
-    ExecutionSettings,
-    RunConfig,
-    load_run_config,
-    validate_demo,
-    validate_settings,
-)
+from asmteach.core.config import ExecutionSettings, RunConfig, check_plugin_choices, load_run_config, validate_settings
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel, Teacher
 from asmteach.core.models import AssemblyTask, TablePlane
@@ -106,16 +99,7 @@ def prepare_run(cfg: RunConfig) -> RunSetup:
     settings carry the table; ``cfg`` itself is not changed.
     """
     cfg = cfg.model_copy(deep=True)
-    for key, role in ROLE_OF_KEY.items():  # plugins and their settings (load_run_config does so too, if asked)
-        choice = getattr(cfg, key)
-        if choice is not None:
-            try:
-                cls = registry.get_class(role, choice.plugin)
-            except UserError as exc:
-                raise UserError(f"{key}.plugin: {exc}") from None
-            validate_settings(cls, choice.settings, where=f"{key}.settings")
-            if key == "teacher":
-                validate_demo(cls, choice.plugin, cfg.demo)
+    check_plugin_choices(cfg)  # plugins and their settings (load_run_config does so too, if asked)
     execution = cfg.execution
     _check_scene(execution)
 

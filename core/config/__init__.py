@@ -16,7 +16,7 @@ checks) and :mod:`.loading` (:func:`load_run_config`, overrides).
 
 from __future__ import annotations
 
-from asmteach.core.config.loading import check_overrides, load_run_config, set_dotted
+from asmteach.core.config.loading import check_overrides, check_plugin_choices, load_run_config, set_dotted
 from asmteach.core.config.run_config import (
     MAX_SEED,
     ROLE_OF_KEY,
@@ -44,6 +44,7 @@ __all__ = [
     "TableSettings",
     "check_finite",
     "check_overrides",
+    "check_plugin_choices",
     "check_plugin_settings",
     "format_validation_error",
     "load_run_config",

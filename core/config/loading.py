@@ -66,19 +66,7 @@ def _validate_run_config(raw: dict[str, Any], overrides: dict[str, Any] | None, 
     except ValidationError as exc:
         raise UserError(format_validation_error(exc)) from None
     if check_plugins:
-        from asmteach.core import registry
-
-        for key, role in ROLE_OF_KEY.items():
-            choice: PluginChoice | None = getattr(cfg, key)
-            if choice is None:
-                continue
-            try:
-                cls = registry.get_class(role, choice.plugin)
-            except UserError as exc:
-                raise UserError(f"{key}.plugin: {exc}") from None
-            validate_settings(cls, choice.settings, where=f"{key}.settings")
-            if key == "teacher":
-                validate_demo(cls, choice.plugin, cfg.demo)
+        check_plugin_choices(cfg)
     return cfg
 
 
@@ -94,3 +82,23 @@ def set_dotted(tree: dict[str, Any], dotted: str, value: Any) -> None:
             raise UserError(f"cannot set {dotted}: {k} is not a mapping")
         node = nxt
     node[keys[-1]] = value
+
+
+def check_plugin_choices(cfg: RunConfig) -> None:
+    """Every plugin the config names exists, and its settings (and a teacher's demo) validate by its models.
+
+    :class:`UserError` naming the key path (``detector.plugin: ...``, ``detector.settings.x: ...``).
+    """
+    from asmteach.core import registry
+
+    for key, role in ROLE_OF_KEY.items():
+        choice: PluginChoice | None = getattr(cfg, key)
+        if choice is None:
+            continue
+        try:
+            cls = registry.get_class(role, choice.plugin)
+        except UserError as exc:
+            raise UserError(f"{key}.plugin: {exc}") from None
+        validate_settings(cls, choice.settings, where=f"{key}.settings")
+        if key == "teacher":
+            validate_demo(cls, choice.plugin, cfg.demo)
