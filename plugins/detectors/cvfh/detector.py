@@ -29,7 +29,9 @@ Pipeline (paper, "Rough detection using point cloud"), all in the world frame
    ``details["ambiguous"]``;
 6. the pose is tried again turned by each *near twin* (a turn that keeps the
    part's surface within ``near_twin_tol``, e.g. a keyed peg about its axis)
-   and by small nudges (``nudge_deg``); the best-scoring verified pose wins,
+   and by small nudges (``nudge_deg``) - a short coarse ICP first, the full one
+   only when it does not fall back onto a pose already tried
+   (``near_screen_iterations``); the best-scoring verified pose wins,
    and when a distinct one (beyond the part's symmetries, ``distinct_mm`` /
    ``distinct_deg``) scores within ``ambiguity_margin`` and the ray evidence
    does not rule it out, the view cannot tell them apart: ``found: false``
