@@ -1,4 +1,4 @@
-"""A part's symmetry group: the proper rotations that map its surface onto itself, and pose errors up to them.
+"""A part's symmetry group: the proper rotations that map its surface onto itself, and its equivalent transforms.
 
 Candidates for the whole group: the 24 rotations of the cube group in the
 part frame and in the principal frame (boxes, cubes), the cyclic group about
