@@ -130,14 +130,17 @@ class ArmConfig(StrictModel):
 
 
 def _panda_hand() -> HandSpec:
-    # Franka Hand: 0-80 mm stroke; boxes measured from the pybullet_data meshes (TCP frame = panda_grasptarget).
+    # Franka Hand: 0-80 mm stroke. The hand's collision mesh (the same in pybullet_data and example-robot-data)
+    # spans x +-0.032, y -0.104..0.100, z -0.026..0.066 in panda_hand; the TCP is 0.1034 (example-robot-data)
+    # or 0.105 (pybullet_data's panda_grasptarget) out, so the palm reaches to z = -0.037 of the TCP (the
+    # nearer of the two). A palm 8 mm shorter let the grasp planner pick grasps whose palm hit the part.
     return HandSpec(
         name="franka_hand",
         max_width=0.08,
-        finger_size=[0.012, 0.02, 0.05],
+        finger_size=[0.012, 0.02, 0.047],
         pad_size=(0.02, 0.018),
-        palm_center=[0.0, 0.0, -0.075],
-        palm_size=[0.06, 0.2, 0.06],
+        palm_center=[0.0, 0.0, -0.084],
+        palm_size=[0.064, 0.205, 0.094],
         max_force=70.0,
     )
 

@@ -80,3 +80,21 @@ def test_links_on_one_rigid_body_are_never_checked(demo_robot) -> None:
     for joint, links in on_joint.items():
         if joint >= 0:
             assert all(frozenset((a, b)) in robot.checker.disabled for a in links for b in links if a != b)
+
+
+def test_the_franka_hand_spec_palm_reaches_as_far_as_the_hand_mesh() -> None:
+    import trimesh
+
+    from asmteach.plugins.robots.urdf_arm.compose import source_path
+
+    setup = load_run(ROOT / "configs/demo_panda.yaml")
+    with create("robots", "urdf_arm", setup.cfg.robot.settings) as robot:
+        q = robot.home("main")
+        robot.sim.set_joints(robot.joint_names("main"), q)
+        T_tcp_hand = np.linalg.solve(robot.fk("main", q), robot.sim.link_pose("panda_hand"))
+        hand = robot.hand
+    mesh = trimesh.load(source_path("erd:panda_description/meshes/collision/hand.stl"), force="mesh")
+    z = trimesh.transform_points(mesh.vertices, T_tcp_hand)[:, 2]
+    front = hand.palm_center[2] + 0.5 * hand.palm_size[2]
+    back = hand.palm_center[2] - 0.5 * hand.palm_size[2]
+    assert front >= z.max() - 1e-4 and back <= z.min() + 1e-4  # the planner's palm is the whole hand body
