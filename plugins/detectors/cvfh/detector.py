@@ -48,7 +48,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from pydantic import Field
-from scipy.spatial import cKDTree
 
 from asmteach.core import geometry
 from asmteach.core.interfaces import Detector, PartModel
@@ -72,6 +71,7 @@ from asmteach.core.perception.segmentation import (
 )
 from asmteach.core.perception.viewpoint import StageClock, resolve_viewpoint
 from asmteach.core.symmetry import part_symmetries
+from asmteach.plugins.detectors.cvfh.prescore import SampleIndex, near_shares, support_gap
 from asmteach.plugins.detectors.cvfh.resting import (
     disagreement,
     hull_twins,
@@ -171,7 +171,7 @@ class _Prepared:
     """Part-frame rotations keeping the part nearly (see :func:`near_twins`)."""
     own: list[np.ndarray]
     """The part's own symmetries (poses that differ by one are the same pose)."""
-    samples: _Samples
+    samples: SampleIndex
     """The model's surface samples indexed for the pre-score's distance tests."""
 
 
@@ -243,7 +243,7 @@ class CvfhIcpDetector(Detector):
                 for a in (-s.nudge_deg, s.nudge_deg):
                     R = geometry.from_rotvec(np.radians(a) * axis / np.linalg.norm(axis))[:3, :3]
                     near.append(geometry.from_rotation(R, com - R @ com))
-        samples = _Samples.of(model, self.seed)
+        samples = SampleIndex.of(model, self.seed)
         prep = _Prepared(
             model, db, diameter, built, 1000.0 * (time.perf_counter() - t0), rests, twins, near, own, samples
         )
@@ -368,8 +368,8 @@ class CvfhIcpDetector(Detector):
         def prescored(hs: list[tuple[int, np.ndarray, float]]) -> list[tuple[int, np.ndarray, float]]:
             """``hs`` best pre-score first (a stable sort: ties keep their order)."""
             # One distance query for every hypothesis: the per-call overhead was most of the matching step.
-            shares = _near_shares([h[1] for h in hs], sub, prep.model, s.refine.icp_coarse_distance, prep.samples)
-            score = [float(sh) - min(1.0, abs(_support_gap(h[1], prep.model, table)) / 0.03)
+            shares = near_shares([h[1] for h in hs], sub, prep.model, s.refine.icp_coarse_distance, prep.samples)
+            score = [float(sh) - min(1.0, abs(support_gap(h[1], prep.model, table)) / 0.03)
                      for h, sh in zip(hs, shares, strict=True)]
             return [hs[i] for i in sorted(range(len(hs)), key=lambda i: -score[i])]
 
@@ -430,10 +430,10 @@ class CvfhIcpDetector(Detector):
             batch = scored[first : first + s.icp_candidates]
             Ts = [job.icp(job.icp_sub, prep.model, T0, s.refine, fine=False) for _, T0, _ in batch]
             coarse = []
-            shares = _near_shares(Ts, job.icp_sub, prep.model, s.refine.inlier_distance, prep.samples)
+            shares = near_shares(Ts, job.icp_sub, prep.model, s.refine.inlier_distance, prep.samples)
             for (view, _, roll), T, share in zip(batch, Ts, shares, strict=True):
                 score = float(share)
-                if abs(_support_gap(T, prep.model, job.table)) > 2.0 * s.refine.support_tolerance:
+                if abs(support_gap(T, prep.model, job.table)) > 2.0 * s.refine.support_tolerance:
                     score -= 1.0  # resting inside the table or floating: last in line
                 coarse.append((score, view, T, roll))
             coarse.sort(key=lambda c: -c[0])
@@ -608,59 +608,3 @@ def _up_for(direction: np.ndarray) -> np.ndarray:
 
 def _down(points: np.ndarray, voxel: float) -> np.ndarray:
     return np.asarray(to_o3d(points).voxel_down_sample(voxel).points)
-
-
-@dataclass
-class _Samples:
-    """A k-d tree over the model's surface samples (part frame, metres) and how far they leave the surface uncovered.
-
-    The distance of a point to the nearest sample bounds its distance to the surface from above, and from
-    below once ``cover`` (the largest distance from a surface point to its nearest sample) is taken off: a
-    threshold test then needs the exact distance (a ray-casting query, ~1.4 us a point) only for the points
-    between the two.
-    """
-
-    tree: cKDTree
-    cover: float
-
-    @classmethod
-    def of(cls, model: ModelCloud, seed: int = 0) -> _Samples:
-        """The index of ``model.points``; ``cover`` from 20 000 seeded surface points, with a 1.5x margin."""
-        import trimesh
-
-        tree = cKDTree(model.points)
-        probe, _ = trimesh.sample.sample_surface(model.mesh, 20000, seed=seed + 7)
-        # The largest gap of 20 000 random points under-estimates the true one by a little: 1.5x covers it.
-        return cls(tree, 1.5 * float(tree.query(probe)[0].max()))
-
-
-def _near_shares(
-    Ts: list[np.ndarray], points: np.ndarray, model: ModelCloud, dist: float, samples: _Samples | None = None
-) -> np.ndarray:
-    """Share of ``points`` (world) within ``dist`` (metres) of the model surface at each pose ``T_world_part``.
-
-    One distance query for all poses (each point's distance is computed on its own, so the shares are the
-    ones separate queries give). With ``samples`` the k-d tree settles most points (nearer than ``dist`` to a
-    sample, or farther than ``dist + cover`` from all) and the exact distance is asked only for the rest.
-    """
-    import open3d as o3d
-
-    if not Ts:
-        return np.zeros(0)
-    local = np.concatenate([geometry.transform_points(geometry.invert(T), points) for T in Ts])
-    if samples is None:
-        d = model.scene.compute_distance(o3d.core.Tensor(local.astype(np.float32))).numpy()
-        return np.mean((d < dist).reshape(len(Ts), -1), axis=1)
-    ds, _ = samples.tree.query(local, distance_upper_bound=dist + samples.cover)
-    near = ds < dist
-    unsure = ~near & np.isfinite(ds)
-    if unsure.any():
-        d = model.scene.compute_distance(o3d.core.Tensor(local[unsure].astype(np.float32))).numpy()
-        near[unsure] = d < dist
-    return np.mean(near.reshape(len(Ts), -1), axis=1)
-
-
-def _support_gap(T_world_part: np.ndarray, model: ModelCloud, table: TablePlane) -> float:
-    """Height (metres) of the model's lowest point above the table at this pose."""
-    n = np.asarray(table.normal, dtype=float)
-    return float(np.min(geometry.transform_points(T_world_part, model.hull_vertices) @ n) - table.height)

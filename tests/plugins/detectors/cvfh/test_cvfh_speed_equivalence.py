@@ -24,7 +24,8 @@ from asmteach.core.perception.registration import (
     surface_check,
     verify,
 )
-from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector, _near_shares, _Samples
+from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
+from asmteach.plugins.detectors.cvfh.prescore import SampleIndex, near_shares
 from asmteach.plugins.detectors.cvfh.scenes import DEFAULT_EYE, default_camera_pose, place_on_table, render_table_scene
 
 
@@ -98,8 +99,8 @@ def test_batched_near_shares_equal_one_query_per_pose(scene_and_model) -> None: 
         local = geometry.transform_points(geometry.invert(T), points)
         d = model.scene.compute_distance(o3d.core.Tensor(local.astype(np.float32))).numpy()
         one_by_one.append(float(np.mean(d < 0.004)))
-    assert _near_shares(Ts, points, model, 0.004).tolist() == one_by_one
-    assert len(_near_shares([], points, model, 0.004)) == 0
+    assert near_shares(Ts, points, model, 0.004).tolist() == one_by_one
+    assert len(near_shares([], points, model, 0.004)) == 0
 
 
 @pytest.mark.parametrize("dist", [0.004, 0.012])
@@ -110,11 +111,11 @@ def test_the_sample_tree_bounds_give_the_shares_of_the_exact_distances(scene_and
     # Poses from right to far off: every point class (near a sample, in the band, beyond it) occurs.
     Ts = [scene.T_world_part @ geometry.from_rotvec(rng.normal(scale=s, size=3)) for s in (0.0, 0.05, 0.3, 1.0)]
     Ts += [geometry.compose(geometry.from_rotation(np.eye(3), rng.normal(scale=0.01, size=3)), T) for T in Ts]
-    samples = _Samples.of(model)
+    samples = SampleIndex.of(model)
     assert 0.0 < samples.cover < 0.01
-    exact = _near_shares(Ts, points, model, dist)
+    exact = near_shares(Ts, points, model, dist)
     assert 0.0 < exact.min() < exact.max() == 1.0
-    assert _near_shares(Ts, points, model, dist, samples).tolist() == exact.tolist()
+    assert near_shares(Ts, points, model, dist, samples).tolist() == exact.tolist()
 
 
 def test_a_verification_rejected_before_the_surface_check_keeps_its_verdict_and_score(scene_and_model) -> None:  # type: ignore[no-untyped-def]
