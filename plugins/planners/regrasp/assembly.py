@@ -112,13 +112,14 @@ def feasible_grasps_at(
     ``settings.max_candidates``, collision of the arm with ``world`` (table
     named ``"table"`` and other obstacles, not this part), the pre-grasp pose
     reachable; checked in ``scene`` with the obstacles of ``world`` and the
-    hands empty (the arms stay where ``scene`` has them).
+    hands empty (the arms stay where ``scene`` has them), IK seeded there.
     """
     scene = cleared_scene(scene, world)
     slot = PoseSlot("probe", "goal", np.asarray(T_world_part, float))
     screen = _screen_settings(settings)
     screened = screen_slot(slot, grasps, world_collider(world), robot.hand, screen, on_table)
-    return _grasp_ids([evaluate_slot(robot, scene, slot, screened, list(robot.arms), settings=screen)])
+    seeds = {arm: np.array(q, dtype=float) for arm, q in scene.configuration.items()}
+    return _grasp_ids([evaluate_slot(robot, scene, slot, screened, list(robot.arms), settings=screen, seeds=seeds)])
 
 
 def _grasp_dict(grasps: Sequence[Grasp]) -> dict[int, Grasp]:
