@@ -13,7 +13,8 @@ Rules, by the block's language tag (README.md and docs/*.md):
 
   - ``asmteach run CONFIG ...`` and ``asmteach sweep EXPERIMENT ...`` take minutes: the fast test runs
     ``asmteach validate`` on their config (the same loader, so a config that validates is one whose run
-    starts) and the real argument parser accepts their flags; the ``slow`` test runs them whole.
+    starts) and the real argument parser accepts their flags. Whole runs are the pipeline's own tests
+    (``tests/core/pipeline``, ``tests/core/test_end_to_end_experiment.py``), not repeated here.
   - ``pip install PATH`` would change the venv: it runs as ``pip install --dry-run --no-deps
     --no-build-isolation --no-index PATH`` (the package builds, nothing is installed).
   - ``make TARGET`` runs as ``make -n TARGET`` (what it would do: ``make test`` inside a test recurses).
@@ -53,7 +54,7 @@ RESULTS = sorted((REPO / "docs" / "results").rglob("*.md"))
 SHELL = {"sh", "bash", "shell", "console"}
 ILLUSTRATION = {"text", "", "output"}
 LONG = {"run", "sweep"}
-"""asmteach commands that take minutes: validated in the fast test, run whole in the slow one."""
+"""asmteach commands that take minutes: validated and their flags parsed, not run."""
 COMMAND_LIKE = re.compile(r"^\s*(\$ |asmteach |\.venv/bin/|python |pip |make |cd )")
 
 
@@ -283,29 +284,6 @@ def test_illustrations_hold_no_commands(block: Block) -> None:
     if block.lang == "":
         looks = [line for line in block.text.splitlines() if COMMAND_LIKE.match(line)]
         assert not looks, f"{block.id}: untagged block with commands {looks[:2]}; fence it as sh (or text)"
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize(
-    "block",
-    [b for b in ALL if b.lang in SHELL and any((_asmteach(w) or [""])[0] in LONG for w in commands(b))],
-    ids=lambda b: b.id,
-)
-def test_long_commands_run_whole(block: Block, tmp_path: Path) -> None:
-    """The ``asmteach run`` / ``sweep`` commands of the docs, as written (``--out`` in a temporary folder)."""
-    for words in commands(block):
-        args = _asmteach(words)
-        if args and args[0] in LONG:
-            proc = subprocess.run(
-                [str(BIN / "asmteach"), *_with_out_in(args, tmp_path)],
-                cwd=REPO,
-                env=env(),
-                capture_output=True,
-                text=True,
-                timeout=1800,
-            )
-            # exit 1 is a run that ended unassembled (a result, reported); 2 or more is bad input or a crash
-            assert proc.returncode in (0, 1), f"{block.id}: {shlex.join(words)}:\n{proc.stderr[-2000:]}"
 
 
 # ---------------------------------------------------------------- docs/results: parsed, not run
