@@ -6,16 +6,8 @@ it. Each part gets a uniform yaw and a position in its own region of the
 table, so the two parts never overlap: A on one side (+y or -y, chosen by the
 seed), B on the other.
 
-Why not the placements of :mod:`asmteach.core.rests`, which every other user
-of resting poses takes: over the 20 parts of sets 1 and 2 trimesh gives 125
-rests, 123 of them the placements (transforms equal to 2.5e-16 with
-:func:`~asmteach.core.rests.placements.resting_poses`; the other two are
-refused by the ``d / h`` margin) with the same landing probabilities (equal to
-3 digits on the four parts compared), but it orders equally likely rests by
-float round-off, so the same draw picks another rest in 379 of 600 seeded
-scenes (10 structures x seeds 0-59): every seeded run and regression test (the
-demo's seeds 12 and 38, the regrasp tests' seeds) would replay a different
-scene. Switching waits for those seeds to be found again.
+The rests and their probabilities come from :func:`asmteach.core.rests.drops.drop_rests`
+(trimesh's drop probabilities; its docstring says why the seeded scenes keep them).
 
 Frames: ``T_world_part`` 4x4, metres; the table top at ``table_height``.
 """
@@ -28,18 +20,15 @@ import trimesh
 from asmteach.core.config import SceneSettings
 from asmteach.core.geometry import compose, from_rotation, rot_z
 from asmteach.core.interfaces import PartModel
+from asmteach.core.rests.drops import drop_rests, likely_rests
 
 __all__ = ["random_start_poses", "stable_poses"]
 
 
 def stable_poses(part: PartModel, min_probability: float) -> tuple[np.ndarray, np.ndarray]:
     """``(transforms (k, 4, 4), probabilities (k,))``: resting poses on z = 0, most likely first."""
-    T, p = trimesh.poses.compute_stable_poses(part.mesh, center_mass=np.asarray(part.center_of_mass, float))
-    T, p = np.asarray(T, float), np.asarray(p, float)
-    keep = p >= min(min_probability, float(p.max()))
-    T, p = T[keep], p[keep]
-    order = np.argsort(-p)
-    return T[order], p[order] / p[order].sum()
+    T, p = drop_rests(part.mesh, part.center_of_mass)
+    return likely_rests(T, p, min_probability=min_probability, likeliest_first=True)
 
 
 def random_start_poses(

@@ -5,5 +5,6 @@
 probabilities) and :mod:`.placements` (:func:`~.placements.compute_placements`:
 one :class:`~asmteach.core.models.Placement` per stable facet with its
 rotational symmetry; :func:`~.placements.resting_poses` for random start poses
-and resting hypotheses). Part frame, metres.
+and resting hypotheses); :mod:`.drops` (trimesh's drop probabilities, from which seeded random scenes
+draw a rest). Part frame, metres.
 """

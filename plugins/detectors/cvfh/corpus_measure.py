@@ -26,6 +26,7 @@ from asmteach.core.hooks import hookimpl
 from asmteach.core.interfaces import Detector, PartModel
 from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
 from asmteach.core.pose_error import pose_error
+from asmteach.core.rests.drops import drop_rests, likely_rests
 from asmteach.core.symmetry import equivalent_transforms
 from asmteach.plugins.detectors.cvfh.scenes import default_camera_pose, place_on_table, render_table_scene
 
@@ -38,10 +39,7 @@ AREA = (0.24, 0.34)
 def rest_poses(mesh: trimesh.Trimesh, com: np.ndarray, min_share: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
     """``(T_table_part (k, 4, 4), probability (k,))`` of trimesh's stable rests, those below ``min_share`` of the
     likeliest dropped (a tube's side is 64 facets of 1.5 % each: the threshold is relative)."""
-    T, p = trimesh.poses.compute_stable_poses(mesh, center_mass=np.asarray(com, float))
-    T, p = np.asarray(T, float), np.asarray(p, float)
-    keep = p >= min_share * p.max()
-    return T[keep], p[keep] / p[keep].sum()
+    return likely_rests(*drop_rests(mesh, com), min_share=min_share)
 
 
 def scene_pose(mesh: trimesh.Trimesh, rests: np.ndarray, probs: np.ndarray, rng: np.random.Generator,

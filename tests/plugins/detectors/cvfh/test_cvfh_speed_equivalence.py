@@ -24,6 +24,7 @@ from asmteach.core.perception.registration import (
     surface_check,
     verify,
 )
+from asmteach.core.rests.drops import drop_rests
 from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
 from asmteach.plugins.detectors.cvfh.prescore import SampleIndex, near_shares
 from asmteach.plugins.detectors.cvfh.scenes import DEFAULT_EYE, default_camera_pose, place_on_table, render_table_scene
@@ -32,10 +33,9 @@ from asmteach.plugins.detectors.cvfh.scenes import DEFAULT_EYE, default_camera_p
 @pytest.fixture(scope="module")
 def scene_and_model():  # type: ignore[no-untyped-def]
     """A prism with a hole lying on the table, seen by the scene Kinect; its model cloud."""
-    import trimesh
 
     mesh = corpus_part("prism_hole_0").mesh
-    T, p = trimesh.poses.compute_stable_poses(mesh, center_mass=np.asarray(mesh.center_mass))
+    T, p = drop_rests(mesh, mesh.center_mass)
     T_true = place_on_table(mesh, T[int(np.argmax(p))], 0.4, (0.46, 0.02))
     scene = render_table_scene(DepthCamera(KinectSettings(), seed=3), mesh, T_true, T_world_cam=default_camera_pose())
     return scene, model_cloud(mesh, 4000)
@@ -139,12 +139,11 @@ def test_a_verification_rejected_before_the_surface_check_keeps_its_verdict_and_
 def test_the_near_twin_screen_finds_the_pose_of_the_full_pass(tmp_path: Path) -> None:
     # A prism with a hole: four near twins (turns the hole side hides) and six nudges, most of which fall back
     # onto the found pose; the screen skips their full ICP, and fewer ICP passes find the same pose.
-    import trimesh
 
     mesh = corpus_part("prism_hole_0").mesh
     mesh.export(tmp_path / "prism.stl")
     part = build_part(PartSpec(name="prism", mesh=str(tmp_path / "prism.stl"), mesh_units="m"))
-    T, p = trimesh.poses.compute_stable_poses(mesh, center_mass=np.asarray(mesh.center_mass))
+    T, p = drop_rests(mesh, mesh.center_mass)
     got = {}
     for k in (0, 10):
         det = CvfhIcpDetector({"near_screen_iterations": k}, seed=0)

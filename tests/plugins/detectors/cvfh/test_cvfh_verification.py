@@ -15,6 +15,7 @@ from asmteach.core.models import TablePlane
 from asmteach.core.parts import PartSpec, build_part
 from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
 from asmteach.core.perception.registration import RefineSettings, icp_refine, model_cloud, surface_check, verify
+from asmteach.core.rests.drops import drop_rests
 from asmteach.core.symmetry import part_symmetries
 from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
 from asmteach.plugins.detectors.cvfh.resting import near_twins
@@ -36,9 +37,8 @@ def keyed_peg(tmp_path_factory: pytest.TempPathFactory) -> PartModel:
 
 def _lying_scene(part: PartModel, yaw: float, seed: int):  # type: ignore[no-untyped-def]
     """The part in its likeliest stable rest at ``yaw``, seen by the scene Kinect."""
-    import trimesh
 
-    T, p = trimesh.poses.compute_stable_poses(part.mesh, center_mass=np.asarray(part.center_of_mass))
+    T, p = drop_rests(part.mesh, part.center_of_mass)
     T_true = place_on_table(part.mesh, T[int(np.argmax(p))], yaw, (0.47, 0.03))
     return render_table_scene(DepthCamera(KinectSettings(), seed=seed), part.mesh, T_true,
                               T_world_cam=default_camera_pose())
