@@ -1,17 +1,22 @@
-"""Why a planning query failed, as a kind callers branch on (never by parsing a reason string).
+"""Why something failed, as kinds callers branch on (never by parsing a reason string).
 
-A planner that fails returns one of these kinds in its structured result
-(:attr:`asmteach.core.interfaces.MotionResult.kind`) next to a readable
-``reason`` for people; code that reacts to the failure (the regrasp planner
-banning a graph node when the goal configuration itself is in collision,
-counting wall-clock cuts) reads the kind.
+:class:`FailureKind`: why a motion query failed. A planner that fails returns
+it in its structured result (:attr:`asmteach.core.interfaces.MotionResult.kind`)
+next to a readable ``reason`` for people; code that reacts to the failure (the
+regrasp planner banning a graph node when the goal configuration itself is in
+collision, counting wall-clock cuts) reads the kind.
+
+:class:`FailureCause`: why a whole run failed. The stage that fails names it
+(:class:`asmteach.core.pipeline.StageFailed`), the assembly planner returns it
+(:attr:`asmteach.core.interfaces.AssemblyResult.cause`), and ``report.json``
+records it (``failure_cause``) beside the readable ``reason``.
 """
 
 from __future__ import annotations
 
 import enum
 
-__all__ = ["FailureKind"]
+__all__ = ["FailureCause", "FailureKind"]
 
 
 class FailureKind(enum.StrEnum):
@@ -24,3 +29,33 @@ class FailureKind(enum.StrEnum):
     TIMEOUT = "timeout"
     ITERATIONS = "iteration limit"
     NO_SOLUTION = "no solution"
+
+
+class FailureCause(enum.StrEnum):
+    """Why a run failed, in pipeline order; the value is what ``report.json`` and the sweeps record."""
+
+    TEACH = "teach"
+    """The demonstration could not be turned into a task (markers not seen, no insertion axis)."""
+    DETECT_NOT_FOUND = "detect_not_found"
+    """A part was not found in the depth view (no cluster, no hypothesis verified)."""
+    DETECT_AMBIGUOUS = "detect_ambiguous"
+    """The view could not tell two poses of a part apart (its detection lists the rivals, ``details["ambiguous"]``)."""
+    CORRECT = "correct"
+    """A part was found but the corrector could not refine its pose."""
+    NO_GRASP = "no_grasp"
+    """No grasp of a part: none for the hand, or none the arms can take at its start or goal pose."""
+    REGRASP_GRAPH = "regrasp_graph"
+    """Grasps exist at the start and the goal, but the regrasp graph holds no connected keyframe path between
+    them, or the planner's time budget ran out searching it."""
+    MOTION = "motion"
+    """Keyframes were found but an arm motion between them could not be planned (IK, collision, timeout)."""
+    EXECUTION_DROP = "execution_drop"
+    """During execution a hand did not close on its part (it is not where the plan assumed)."""
+    JAM = "jam"
+    """Assembled outside tolerance, with B pushed in the hand during an insertion: it met resistance there."""
+    TOPPLE = "topple"
+    """A part tipped over (reserved: no stage records structured evidence of it yet)."""
+    OFF_GOAL = "off_goal"
+    """Assembled outside tolerance with no jam on an insertion: a part ended off its goal."""
+    OTHER = "other"
+    """Anything else: bad input met late, an internal error, a plugin's own failure without a cause."""

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from asmteach.core.failures import FailureKind
+from asmteach.core.failures import FailureCause, FailureKind
 from asmteach.core.interfaces.part_model import PartModel
 from asmteach.core.interfaces.plugin import Plugin
 from asmteach.core.interfaces.robot import Robot
@@ -102,7 +102,8 @@ class AssemblyResult:
 
     ``plan`` holds the timed segments found so far even on failure;
     ``failed_at`` names the part and keyframe; ``T_world_a_goal`` and
-    ``T_world_b_goal`` are where the parts are meant to end.
+    ``T_world_b_goal`` are where the parts are meant to end; ``cause`` says
+    why planning failed as a kind the run records (``reason`` is for people).
     """
 
     success: bool
@@ -113,6 +114,10 @@ class AssemblyResult:
     T_world_b_goal: np.ndarray | None = None
     details: dict[str, Any] = field(default_factory=dict)
     """Planner-specific data for figures (graphs, keyframe searches)."""
+    cause: FailureCause | None = None
+    """Why it failed (None on success, or a planner that does not say; the run then records ``other``):
+    ``no_grasp`` (no feasible grasp at the start or goal), ``regrasp_graph`` (no connected keyframe path, or the
+    search's budget spent), ``motion`` (keyframes found, a motion between them not planned)."""
 
 
 class AssemblyPlanner(Plugin):

@@ -6,6 +6,7 @@ from typing import Any
 
 from pydantic import Field
 
+from asmteach.core.failures import FailureCause
 from asmteach.core.models.base import StrictModel
 from asmteach.core.models.detection import Detection
 from asmteach.core.models.task import AssemblyTask
@@ -31,6 +32,13 @@ class RunReport(StrictModel):
     success: bool = False
     failed_stage: str | None = None
     reason: str | None = None
+    failure_cause: FailureCause | None = Field(
+        None,
+        description="why the run failed, as a kind to count and branch on (asmteach.core.failures.FailureCause: "
+        "teach, detect_not_found, detect_ambiguous, correct, no_grasp, regrasp_graph, motion, execution_drop, jam, "
+        "topple, off_goal, other); decided by the failing stage from structured data, never parsed from the reason; "
+        "None on success and in reports written before it existed",
+    )
     stages: list[StageOutcome] = Field(default_factory=list)
     task: AssemblyTask | None = None
     detections: list[Detection] = Field(default_factory=list)

@@ -9,13 +9,14 @@ import numpy as np
 
 from asmteach.core import geometry
 from asmteach.core.detect_correct import detect_and_correct
+from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import PartModel, Robot
 from asmteach.core.models import Detection, TablePlane
 from asmteach.core.pipeline.stage import Run, StageFailed
 from asmteach.core.pose_error import pose_error
 from asmteach.core.scene import random_start_poses
 
-__all__ = ["detect_stage", "sense", "spawn_stage", "symmetric_surface_error"]
+__all__ = ["detect_stage", "not_found_cause", "sense", "spawn_stage", "symmetric_surface_error"]
 
 
 def symmetric_surface_error(part: PartModel, T_est: np.ndarray, T_true: np.ndarray, n: int = 500) -> float:
@@ -31,6 +32,12 @@ def symmetric_surface_error(part: PartModel, T_est: np.ndarray, T_true: np.ndarr
     b = geometry.transform_points(T_true, np.asarray(part.mesh.sample(4000, return_index=False, seed=1), float))
     d, _ = cKDTree(b).query(a)
     return float(1000.0 * d.mean())
+
+
+def not_found_cause(det: Detection) -> FailureCause:
+    """A detection that found no part: ambiguous when it lists rival poses the view cannot tell apart
+    (``details["ambiguous"]``, as the cvfh detector marks them), else not found."""
+    return FailureCause.DETECT_AMBIGUOUS if det.details.get("ambiguous") else FailureCause.DETECT_NOT_FOUND
 
 
 def spawn_stage(run: Run, robot: Robot, a: PartModel, b: PartModel, table: TablePlane) -> dict[str, np.ndarray]:
@@ -59,10 +66,13 @@ def detect_stage(
             det = detect_and_correct(detector, corrector, cloud, part, table, viewpoint=viewpoint)
             if not det.found or det.rough is None:
                 run.report.detections.append(det)
-                raise StageFailed(f"{part.name} not found: {det.reason}")
+                raise StageFailed(f"{part.name} not found: {det.reason}", cause=not_found_cause(det))
             if "correction_error" in det.details:
                 run.report.detections.append(det)
-                raise StageFailed(f"{part.name} found but not corrected: {det.details['correction_error']}")
+                raise StageFailed(
+                    f"{part.name} found but not corrected: {det.details['correction_error']}",
+                    cause=FailureCause.CORRECT,
+                )
             T_true = truth[part.name]
             det.details["T_world_part_true"] = T_true.tolist()
             for key in ("rough", "corrected"):

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from asmteach.core import geometry
+from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import Robot
 from asmteach.core.models import Plan, RunReport
 from asmteach.core.pipeline.stage import Run, StageFailed
@@ -38,7 +39,7 @@ def execute_stage(run: Run, robot: Robot, plan: Plan, stage: str = "execute") ->
                     robot.execute(chunk)
                     if record:
                         frames.append(robot.sense_rgb())
-                trace.after_path(seg.trajectory, seg.label)
+                trace.after_path(seg.trajectory, seg.label, seg.kind)
                 _count_robot_seconds(run.report, seg)
             elif seg.gripper is not None:
                 ev = seg.gripper
@@ -46,7 +47,9 @@ def execute_stage(run: Run, robot: Robot, plan: Plan, stage: str = "execute") ->
                 trace.before_grip(seg.label, ev.arm, close, ev.attach)
                 ok = robot.grip(ev.arm, close, ev.attach)
                 if close and not ok:
-                    raise StageFailed(f"{seg.label}: the fingers did not close on the part")
+                    raise StageFailed(
+                        f"{seg.label}: the fingers did not close on the part", cause=FailureCause.EXECUTION_DROP
+                    )
                 trace.after_grip(ev.arm, close, ev.attach)
             run.hook("asmteach_stage_progress", stage="execute", advance=1, message=seg.label)
         d["segments"] = len(plan.segments)
@@ -69,8 +72,9 @@ class _ExecutionTrace:
 
     One event per gripper action: the part's pose (mm, deg); on close, how far
     it moved since its release (toppled, pushed); on release, how far it
-    slipped in the hand while held, the label of the motion before, and how
-    far it dropped when let go (mm).
+    slipped in the hand while held, the label and kind (``after_kind``:
+    transit, approach, insertion, regrasp or None) of the motion before, and
+    how far it dropped when let go (mm).
     """
 
     def __init__(self, robot: Robot) -> None:
@@ -81,14 +85,16 @@ class _ExecutionTrace:
         self.T_released: dict[str, np.ndarray] = {}  # part -> T_world_part after its last release
         self.max_tracking_error = 0.0
         self.last_path: dict[str, str] = {}  # arm -> label of its last motion
+        self.last_kind: dict[str, str | None] = {}  # arm -> kind of its last motion (PlanSegment.kind)
 
     def _tcp(self, arm: str) -> np.ndarray:
         return self.robot.fk(arm, self.robot.current(arm))
 
-    def after_path(self, traj: Any, label: str) -> None:
+    def after_path(self, traj: Any, label: str, kind: str | None = None) -> None:
         err = float(np.max(np.abs(self.robot.current(traj.arm) - np.asarray(traj.positions)[-1])))
         self.max_tracking_error = max(self.max_tracking_error, err)
         self.last_path[traj.arm] = label
+        self.last_kind[traj.arm] = kind
 
     def before_grip(self, label: str, arm: str, close: bool, part: str | None) -> None:
         part = part if close else self.held.get(arm)
@@ -103,6 +109,7 @@ class _ExecutionTrace:
                 T_expected = self._tcp(arm) @ self.T_tcp_part[part]
                 ev["slip_in_hand_mm"] = round(1000.0 * geometry.translation_distance(T, T_expected), 2)
                 ev["after"] = self.last_path.get(arm, "")
+                ev["after_kind"] = self.last_kind.get(arm)
         self.events.append(ev)
 
     def after_grip(self, arm: str, close: bool, part: str | None) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Any
 
 from asmteach.core.detect_correct import detect_and_correct
+from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import AssemblyProblem, PartModel, Robot
 from asmteach.core.io import to_jsonable, write_model
 from asmteach.core.models import AssemblyTask, Detection, Plan, TablePlane
@@ -26,7 +27,7 @@ def grasps_stage(run: Run, robot: Robot, a: PartModel, b: PartModel) -> dict[str
         for part in (a, b):
             gs = planner.plan(part, robot.hand)
             if not gs:
-                raise StageFailed(f"no force-closure grasp of {part.name} for this hand")
+                raise StageFailed(f"no force-closure grasp of {part.name} for this hand", cause=FailureCause.NO_GRASP)
             out[part.name] = gs
             d[part.name] = len(gs)
             run.hook("asmteach_stage_progress", stage="grasps", advance=1, message=part.name)
@@ -61,7 +62,11 @@ def plan_stage(
         write_model(run.out / "plan.json", result.plan)
         run.artefact("plan", run.out / "plan.json", "json")
         if not result.success:
-            raise StageFailed(result.reason or "assembly planning failed", {"failed_at": result.failed_at})
+            raise StageFailed(
+                result.reason or "assembly planning failed",
+                {"failed_at": result.failed_at},
+                cause=result.cause or FailureCause.OTHER,
+            )
         if run.execution.recheck_plan:
             try:
                 chk = robot.verify_plan(
@@ -110,7 +115,10 @@ def look_again_stage(
         det = detect_and_correct(detector, corrector, cloud, a, table, viewpoint=viewpoint)
         if not det.found or det.rough is None:
             if detections[a.name].details.get("ambiguous"):
-                raise StageFailed(f"{a.name} not found again at its goal: {det.reason}")
+                # its first detection listed a twin the view could not rule out, and the goal view finds neither
+                raise StageFailed(
+                    f"{a.name} not found again at its goal: {det.reason}", cause=FailureCause.DETECT_AMBIGUOUS
+                )
             d["not_found"] = det.reason  # nothing to decide: the plan goes on as it was
             return result, rest
         T = det.best
@@ -156,6 +164,7 @@ def look_again_stage(
                 f"{a.name} is not at its goal ({err.position_mm:.1f} mm / {err.angle_deg:.1f} deg "
                 f"off) and planning again failed: {new.reason}",
                 {"failed_at": new.failed_at},
+                cause=new.cause or FailureCause.OTHER,
             )
         return new, new.plan
 

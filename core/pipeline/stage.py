@@ -1,7 +1,7 @@
 """A run's state and its stages: each stage timed, announced to the hooks and recorded in the report.
 
-A stage that fails ends the run as a *result* (:class:`StageFailed`): the report records the stage and the
-reason, a bug's traceback included.
+A stage that fails ends the run as a *result* (:class:`StageFailed`): the report records the stage, the
+reason, a bug's traceback included, and the cause (:class:`~asmteach.core.failures.FailureCause`).
 """
 
 from __future__ import annotations
@@ -18,21 +18,32 @@ import numpy as np
 from asmteach.core import registry
 from asmteach.core.config import ROLE_OF_KEY, ExecutionSettings, RunConfig, validate_settings
 from asmteach.core.errors import UserError
+from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import PartModel
 from asmteach.core.io import describe_os_error, to_jsonable
 from asmteach.core.models import RunReport, StageOutcome
 from asmteach.core.symmetry import part_symmetries
 
-__all__ = ["Run", "StageFailed"]
+__all__ = ["Run", "StageFailed", "default_cause"]
 
 
 class StageFailed(Exception):
-    """A stage could not produce its result; the run ends as a recorded failure."""
+    """A stage could not produce its result; the run ends as a recorded failure.
 
-    def __init__(self, reason: str, details: dict[str, Any] | None = None) -> None:
+    ``reason`` is for people; ``cause`` is what code and the sweeps branch on, decided where the stage fails from
+    structured data (None: the stage's default, :func:`default_cause`).
+    """
+
+    def __init__(self, reason: str, details: dict[str, Any] | None = None, cause: FailureCause | None = None) -> None:
         super().__init__(reason)
         self.reason = reason
         self.details = details or {}
+        self.cause = cause
+
+
+def default_cause(stage: str) -> FailureCause:
+    """The cause of a stage's failure that names none (an exception other than a :class:`StageFailed` with one)."""
+    return FailureCause.TEACH if stage == "teach" else FailureCause.OTHER
 
 
 class Run:
@@ -83,9 +94,11 @@ class Run:
             yield details
         except Exception as exc:  # noqa: BLE001 - any failure of a stage ends the run as a recorded result
             seconds = time.perf_counter() - t0
+            cause = default_cause(name)
             if isinstance(exc, StageFailed):
                 reason = exc.reason
                 details.update(exc.details)
+                cause = exc.cause or cause
             elif isinstance(exc, UserError | NotImplementedError):  # bad input; a plugin without an optional method
                 reason = str(exc)
             elif isinstance(exc, OSError):  # the file system failed (a full disk): the task failed, no bug
@@ -98,9 +111,15 @@ class Run:
                     stage=name, ok=False, seconds=round(seconds, 3), reason=reason, details=to_jsonable(details)
                 )
             )
-            self.report.failed_stage, self.report.reason = name, reason
-            self.hook("asmteach_stage_finished", stage=name, ok=False, seconds=seconds, summary={"reason": reason})
-            raise StageFailed(reason) from None
+            self.report.failed_stage, self.report.reason, self.report.failure_cause = name, reason, cause
+            self.hook(
+                "asmteach_stage_finished",
+                stage=name,
+                ok=False,
+                seconds=seconds,
+                summary={"reason": reason, "cause": cause.value},
+            )
+            raise StageFailed(reason, cause=cause) from None
         seconds = time.perf_counter() - t0
         self.report.stages.append(
             StageOutcome(stage=name, ok=True, seconds=round(seconds, 3), details=to_jsonable(details))

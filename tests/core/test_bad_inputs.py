@@ -643,6 +643,7 @@ def test_bad_input_gives_one_line_and_the_right_exit_code(case: Case, tmp_path: 
     if case.id == "run-stage-crash":  # the run still wrote its report, with the traceback
         report = json.loads((work / "out" / "report.json").read_text())
         assert report["failed_stage"] == "teach" and "ValueError" in report["stages"][0]["details"]["traceback"]
+        assert report["failure_cause"] == "teach"  # an exception that is no StageFailed: the cause by stage
     if case.id == "run-interrupted":
         assert sorted(p.name for p in (work / "out").iterdir()) == ["report.json"]
         assert '"old"' in (work / "out" / "report.json").read_text()

@@ -43,6 +43,7 @@ from typing import Any
 import networkx as nx
 import numpy as np
 
+from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import MotionPlanner, Obstacle, PartModel, Robot
 from asmteach.core.models import Grasp
 from asmteach.core.robot import PlanningScene
@@ -88,6 +89,9 @@ class TransferResult:
     layers: list[dict[str, Any]] = field(default_factory=list)
     scene: PlanningScene | None = field(default=None, repr=False)
     """The planning scene the transfer ends (or failed) with; the next part's planning starts from it."""
+    cause: FailureCause | None = None
+    """Why it failed (None on success): see :func:`_search_cause`; ``motion`` when ``max_attempts`` keyframe
+    sequences each had a motion fail."""
 
 
 def _screen_settings(settings: AssemblySettings) -> ScreenSettings:
@@ -292,6 +296,7 @@ def plan_transfer(
                 stats=_rounded(stats),
                 layers=[f.counts() for f in layers],
                 scene=scene,
+                cause=_search_cause(search, layers),
             )
         attempts += 1
         tm = time.perf_counter()
@@ -320,6 +325,7 @@ def plan_transfer(
                     reason=f"{attempts} keyframe sequences tried (max_attempts); last failure: {last_reason}; "
                     f"{_time_spent(stats, t0)}",
                     scene=scene,
+                    cause=FailureCause.MOTION,
                 )
             if time.perf_counter() - t0 > settings.time_budget:
                 stats["wall_clock_cuts"].append(f"time budget of {settings.time_budget:.0f} s")
@@ -331,6 +337,7 @@ def plan_transfer(
                     reason=f"time budget of {settings.time_budget:.0f} s (wall clock) spent after {attempts} "
                     f"keyframe sequences; last failure: {last_reason}; {_time_spent(stats, t0)}",
                     scene=scene,
+                    cause=FailureCause.REGRASP_GRAPH,  # the search's budget spent, as a cut graph
                 )
             continue
         stats["motion_seconds"] += time.perf_counter() - tm
@@ -347,6 +354,19 @@ def plan_transfer(
             keyframes=keyframes,
             scene=scene,
         )
+
+
+def _search_cause(search: KeyframeSearch, layers: Sequence[GraspFeasibility]) -> FailureCause:
+    """Why a keyframe search failed, from where it is cut (:attr:`KeyframeSearch.cut`) and the layers' solutions.
+
+    Cut at the start or the goal with no feasible grasp in that layer: ``no_grasp``. Cut there although the
+    layer had feasible grasps: every one of them was banned after its motion failed, so ``motion``. Cut
+    between the layers (no grasp connects them, banned edges included): ``regrasp_graph``.
+    """
+    if search.cut in ("start", "goal"):
+        layer = layers[0 if search.cut == "start" else 1]
+        return FailureCause.NO_GRASP if not layer.solutions else FailureCause.MOTION
+    return FailureCause.REGRASP_GRAPH
 
 
 def _grasp_ids(layers: Sequence[GraspFeasibility]) -> set[int]:

@@ -271,6 +271,7 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
     ) -> AssemblyResult:
         result.reason = f"{who}: {res.reason}"
         result.failed_at = who
+        result.cause = res.cause
         if not keep_plan:
             result.plan = Plan(stats={"planning_seconds": round(time.perf_counter() - t0, 3)})
         result.details["why_layers"] = res.layers

@@ -18,14 +18,15 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from asmteach.core import geometry
+from asmteach.core.failures import FailureCause
 from asmteach.core.hand_geometry import MeshCollider
 from asmteach.core.interfaces import IKResult, MotionResult, Obstacle, PartModel, Robot
 from asmteach.core.models import Grasp, HandSpec, PartSpec, Primitive, SolidSpec
 from asmteach.core.parts import build_part
 from asmteach.core.rests.placements import compute_placements
 from asmteach.core.robot import PlanningScene
-from asmteach.plugins.planners.regrasp.assembly import plan_transfer
-from asmteach.plugins.planners.regrasp.graph import PoseSlot
+from asmteach.plugins.planners.regrasp.assembly import TransferResult, _search_cause, plan_transfer
+from asmteach.plugins.planners.regrasp.graph import GraspFeasibility, KeyframeSearch, PoseSlot
 from asmteach.plugins.planners.regrasp.realise import PlaceGoal
 from asmteach.plugins.planners.regrasp.settings import AssemblySettings
 from asmteach.plugins.planners.regrasp.slots import placement_slots, relocated_slots
@@ -173,6 +174,8 @@ def test_without_relocations_the_peg_cannot_be_turned(peg) -> None:
     res, calls = transfer(peg, AssemblySettings(placement_yaws=2, relocations=()))
     assert not res.success and calls == [False, True]
     assert "relocations" not in res.stats
+    # grasps at the start and at the goal, none connecting them: the regrasp graph is cut, not the grasps
+    assert res.stats["cut"] == "between" and res.cause is FailureCause.REGRASP_GRAPH
 
 
 def test_a_position_too_near_an_obstacle_is_skipped_for_the_next(peg) -> None:
@@ -238,6 +241,7 @@ def test_re_searches_are_counted_and_wall_clock_cuts_reported(peg) -> None:
     )
     assert not res.success
     assert "1 keyframe sequences tried (max_attempts)" in (res.reason or "")
+    assert res.cause is FailureCause.MOTION  # keyframes were found; their motions were not
     assert res.stats["wall_clock_cuts"] == ["motion to the pre-grasp at start: timeout after 5.0 s"]
 
 
@@ -246,10 +250,34 @@ def test_a_goal_no_grasp_reaches_says_how_many_fail_and_why(peg) -> None:
     reason counts them, and the result holds the counts per slot and where the time went."""
     flipped = geometry.from_rotation(Rotation.from_euler("x", np.pi).as_matrix() @ LYING, [*GOAL_XY, 0.3])
     res, _ = transfer(peg, AssemblySettings(placement_yaws=2, max_placements=0), T_goal=flipped)
-    assert not res.success and res.stats["cut"] == "goal"
+    assert not res.success and res.stats["cut"] == "goal" and res.cause is FailureCause.NO_GRASP
     assert (
         "no grasp is feasible at the goal pose (IK or collision): of 3 grasp variants at goal, 3 no IK " in res.reason
     )
     assert " s spent: " in res.reason and " s on motions" in res.reason
     goal = next(c for c in res.layers if c["slot"] == "goal")
     assert goal == {"slot": "goal", "candidates": 3, "feasible": 0, "rejected": {"no IK solution": 3}, "with_table": {}}
+
+
+def test_a_layer_emptied_by_banned_motions_is_a_motion_failure_not_a_missing_grasp() -> None:
+    cut = KeyframeSearch(False, cut="start")
+    empty = [
+        GraspFeasibility(PoseSlot("start", "start", np.eye(4)), {}),
+        GraspFeasibility(PoseSlot("goal", "goal", np.eye(4)), {}),
+    ]
+    solved = [GraspFeasibility(PoseSlot("start", "start", np.eye(4)), {(1, "left"): np.zeros(6)}), empty[1]]
+    assert _search_cause(cut, empty) is FailureCause.NO_GRASP
+    assert _search_cause(cut, solved) is FailureCause.MOTION  # every start grasp banned after its motion failed
+    assert _search_cause(KeyframeSearch(False, cut="between", components=2), solved) is FailureCause.REGRASP_GRAPH
+
+
+def test_the_assembly_planner_returns_the_failed_transfers_cause() -> None:
+    from asmteach.core.interfaces import AssemblyResult
+    from asmteach.core.models import Plan
+    from asmteach.plugins.planners.regrasp.planner import RegraspAssemblyPlanner
+
+    planner = RegraspAssemblyPlanner(RegraspAssemblyPlanner.Settings(), seed=0)
+    failed = TransferResult(False, reason="no grasp is feasible at the goal pose", cause=FailureCause.NO_GRASP)
+    result = planner._fail(AssemblyResult(False, Plan()), failed, "part A (peg)", 0.0, EdgeOfReachArm())
+    assert not result.success and result.cause is FailureCause.NO_GRASP
+    assert result.reason == "part A (peg): no grasp is feasible at the goal pose"
