@@ -41,8 +41,18 @@ from asmteach.core.sweep import Experiment
 __all__ = ["CAUSES", "StructuresCorpus", "StructuresCorpusParams", "cause_named", "failure_cause"]
 
 CAUSES: tuple[str, ...] = (
-    "teach", "detect_not_found", "detect_ambiguous", "correct", "no_grasp", "regrasp_graph", "motion",
-    "execution_drop", "jam", "topple", "off_goal", "other",
+    "teach",
+    "detect_not_found",
+    "detect_ambiguous",
+    "correct",
+    "no_grasp",
+    "regrasp_graph",
+    "motion",
+    "execution_drop",
+    "jam",
+    "topple",
+    "off_goal",
+    "other",
 )
 """Failure-cause categories, in pipeline order; ``other`` is anything the classifier does not recognise."""
 
@@ -52,11 +62,16 @@ class StructuresCorpusParams(StrictModel):
 
     family: str = Field(description="structure family (asmteach.core.structure_corpus.STRUCTURE_FAMILIES)")
     index: int = Field(0, ge=0, le=10_000, description="the structure's index within its family")
-    generator_seed: int = Field(0, ge=0, le=2**31 - 1,
-                                description="draws the structure's sizes, clearance, variant and markers "
-                                            "(not the run seed)")
-    overrides: dict[str, Any] = Field(default_factory=lambda: {"execution.animation": False},
-                                      description="dotted run-config keys set for every trial (as asmteach run --set)")
+    generator_seed: int = Field(
+        0,
+        ge=0,
+        le=2**31 - 1,
+        description="draws the structure's sizes, clearance, variant and markers (not the run seed)",
+    )
+    overrides: dict[str, Any] = Field(
+        default_factory=lambda: {"execution.animation": False},
+        description="dotted run-config keys set for every trial (as asmteach run --set)",
+    )
 
 
 # ---------------------------------------------------------------- failure causes
@@ -95,8 +110,14 @@ def failure_cause(stage: str, reason: str) -> str:
     if stage in _PLAN_STAGES:
         if "force-closure" in text or "no grasp is feasible" in text or "no grasp of" in text:
             return "no_grasp"
-        if ("keyframe path" in text or "shared between" in text or "regrasp graph" in text
-                or "time budget" in text or "unconnected" in text or "no grasp shared" in text):
+        if (
+            "keyframe path" in text
+            or "shared between" in text
+            or "regrasp graph" in text
+            or "time budget" in text
+            or "unconnected" in text
+            or "no grasp shared" in text
+        ):
             # "time budget ... spent after N keyframe sequences": the graph search never found a sequence whose
             # motions all plan; the issue counts budget spent in the regrasp graph here
             return "regrasp_graph"
@@ -142,8 +163,9 @@ class StructuresCorpus(Experiment):
         from asmteach.core.structure_corpus import STRUCTURE_FAMILIES
 
         if params.family not in STRUCTURE_FAMILIES:
-            raise UserError(f"params.family: no structure family {params.family!r}; families: "
-                            f"{', '.join(STRUCTURE_FAMILIES)}")
+            raise UserError(
+                f"params.family: no structure family {params.family!r}; families: {', '.join(STRUCTURE_FAMILIES)}"
+            )
         check_overrides(params.overrides)  # each trial's run config is made later: its keys are checked now
 
     def run_trial(self, params: StructuresCorpusParams, seed: int, workdir: Path) -> dict[str, Any]:
@@ -157,8 +179,11 @@ class StructuresCorpus(Experiment):
         write_structure(gs, folder)
         config = write_run_config(gs, folder, seed=seed)
         base: dict[str, Any] = {
-            "family": gs.family, "structure": gs.name, "clearance_mm": round(gs.clearance * 1e3, 3),
-            "insertion_mm": round(gs.insertion_depth * 1e3, 2), "markers_a": len(gs.markers_a),
+            "family": gs.family,
+            "structure": gs.name,
+            "clearance_mm": round(gs.clearance * 1e3, 3),
+            "insertion_mm": round(gs.insertion_depth * 1e3, 2),
+            "markers_a": len(gs.markers_a),
             "markers_b": len(gs.markers_b),
             "variant": next((str(gs.params[k]) for k in ("hole", "slot", "pin", "post") if k in gs.params), ""),
         }
@@ -167,8 +192,10 @@ class StructuresCorpus(Experiment):
         if row["success"]:
             out.update(cause="", cause_named=True)
         else:
-            out.update(cause=failure_cause(row["failed_stage"], row["reason"]),
-                       cause_named=cause_named(row["failed_stage"], row["reason"]))
+            out.update(
+                cause=failure_cause(row["failed_stage"], row["reason"]),
+                cause_named=cause_named(row["failed_stage"], row["reason"]),
+            )
         return out
 
     def summarize(self, rows: list[dict[str, Any]], out_dir: Path) -> list[Path]:
@@ -186,8 +213,15 @@ def _trial_record(row: dict[str, Any]) -> dict[str, Any]:
     point = row.get("point") or {}
     if not row.get("ok"):
         error = " ".join(str(row.get("error") or "the trial raised").split())
-        m = {"family": point.get("family", "?"), "structure": f"{point.get('family', '?')}[{point.get('index', '?')}]",
-             "success": False, "failed_stage": "trial", "reason": error, "cause": "other", "cause_named": True}
+        m = {
+            "family": point.get("family", "?"),
+            "structure": f"{point.get('family', '?')}[{point.get('index', '?')}]",
+            "success": False,
+            "failed_stage": "trial",
+            "reason": error,
+            "cause": "other",
+            "cause_named": True,
+        }
     elif not m.get("success"):
         # classified again from the report's reason: a sharper classifier applies to the rows logged before it
         m["cause"] = failure_cause(m.get("failed_stage", ""), m.get("reason", ""))
@@ -201,20 +235,32 @@ def summary_markdown(trials: list[dict[str, Any]]) -> str:
     from asmteach.core.structure_corpus import STRUCTURE_FAMILIES
 
     n_ok = sum(bool(t.get("success")) for t in trials)
-    lines = [f"# structures_corpus\n\n{n_ok} of {len(trials)} trials assembled "
-             f"({len({t['structure'] for t in trials})} structures).\n",
-             "## Success by family\n", "| family | trials | assembled | rate | median B-in-A error (mm / deg) "
-             "of the assembled | median plan s | median robot s |", "|---|---|---|---|---|---|---|"]
+    lines = [
+        f"# structures_corpus\n\n{n_ok} of {len(trials)} trials assembled "
+        f"({len({t['structure'] for t in trials})} structures).\n",
+        "## Success by family\n",
+        "| family | trials | assembled | rate | median B-in-A error (mm / deg) "
+        "of the assembled | median plan s | median robot s |",
+        "|---|---|---|---|---|---|---|",
+    ]
     families = [f for f in STRUCTURE_FAMILIES if any(t["family"] == f for t in trials)]
     families += sorted({t["family"] for t in trials} - set(families))
     for f in families:
         ts = [t for t in trials if t["family"] == f]
         won = [t for t in ts if t.get("success")]
-        err = (f"{_median([t.get('achieved_vs_taught_mm') for t in won]):.2f} / "
-               f"{_median([t.get('achieved_vs_taught_deg') for t in won]):.2f}") if won else "-"
-        lines.append(f"| {f} | {len(ts)} | {len(won)} | {len(won) / len(ts):.0%} | {err} | "
-                     f"{_fmt(_median([t.get('plan_seconds') for t in ts]))} | "
-                     f"{_fmt(_median([t.get('robot_seconds') for t in ts]))} |")
+        err = (
+            (
+                f"{_median([t.get('achieved_vs_taught_mm') for t in won]):.2f} / "
+                f"{_median([t.get('achieved_vs_taught_deg') for t in won]):.2f}"
+            )
+            if won
+            else "-"
+        )
+        lines.append(
+            f"| {f} | {len(ts)} | {len(won)} | {len(won) / len(ts):.0%} | {err} | "
+            f"{_fmt(_median([t.get('plan_seconds') for t in ts]))} | "
+            f"{_fmt(_median([t.get('robot_seconds') for t in ts]))} |"
+        )
     failed = [t for t in trials if not t.get("success")]
     lines += ["", "## Failure causes\n"]
     if failed:
@@ -227,21 +273,33 @@ def summary_markdown(trials: list[dict[str, Any]]) -> str:
             lines.append(f"| {cause} | {len(ts)} | {stages} | {fams} | {_cell(ts[0]['reason'], 240)} |")
         bare = [t for t in failed if not t.get("cause_named", True)]
         if bare:
-            lines += ["", f"{len(bare)} failure(s) name no cause, only how far off the result was (issue 23 item 5 "
-                      "calls that a defect): " + ", ".join(f"{t['structure']} seed {t['seed']}" for t in bare) + "."]
+            lines += [
+                "",
+                f"{len(bare)} failure(s) name no cause, only how far off the result was (issue 23 item 5 "
+                "calls that a defect): " + ", ".join(f"{t['structure']} seed {t['seed']}" for t in bare) + ".",
+            ]
     else:
         lines.append("_no failures_")
-    lines += ["", "## Every trial\n", "| structure | seed | assembled | B in A (mm / deg) | failed stage | cause | "
-              "reason (the report's) | teach s | detect s | plan s | execute s | robot s |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        "## Every trial\n",
+        "| structure | seed | assembled | B in A (mm / deg) | failed stage | cause | "
+        "reason (the report's) | teach s | detect s | plan s | execute s | robot s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for t in sorted(trials, key=lambda t: (str(t["structure"]), t.get("seed") or 0)):
-        err = (f"{t['achieved_vs_taught_mm']:.2f} / {t['achieved_vs_taught_deg']:.2f}"
-               if isinstance(t.get("achieved_vs_taught_mm"), int | float) else "-")
-        lines.append(f"| {t['structure']} | {t.get('seed')} | {'yes' if t.get('success') else 'no'} | {err} | "
-                     f"{t.get('failed_stage') or '-'} | {t.get('cause') or '-'} | {_cell(t.get('reason') or '-', 300)}"
-                     f" | {_fmt(t.get('teach_seconds'))} | {_fmt(t.get('detect_seconds'))} | "
-                     f"{_fmt(t.get('plan_seconds'))} | {_fmt(t.get('execute_seconds'))} | "
-                     f"{_fmt(t.get('robot_seconds'))} |")
+        err = (
+            f"{t['achieved_vs_taught_mm']:.2f} / {t['achieved_vs_taught_deg']:.2f}"
+            if isinstance(t.get("achieved_vs_taught_mm"), int | float)
+            else "-"
+        )
+        lines.append(
+            f"| {t['structure']} | {t.get('seed')} | {'yes' if t.get('success') else 'no'} | {err} | "
+            f"{t.get('failed_stage') or '-'} | {t.get('cause') or '-'} | {_cell(t.get('reason') or '-', 300)}"
+            f" | {_fmt(t.get('teach_seconds'))} | {_fmt(t.get('detect_seconds'))} | "
+            f"{_fmt(t.get('plan_seconds'))} | {_fmt(t.get('execute_seconds'))} | "
+            f"{_fmt(t.get('robot_seconds'))} |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -277,8 +335,9 @@ def _plot(trials: list[dict[str, Any]], path: Path) -> Path:
     fig = Figure(figsize=(11, 4.2))
     ax1, ax2 = fig.subplots(1, 2)
     n = [sum(t["family"] == f for t in trials) for f in families]
-    rate = [sum(bool(t.get("success")) for t in trials if t["family"] == f) / k for f, k in zip(families, n,
-                                                                                                strict=True)]
+    rate = [
+        sum(bool(t.get("success")) for t in trials if t["family"] == f) / k for f, k in zip(families, n, strict=True)
+    ]
     ax1.bar(x, rate, color="tab:green")
     for xi, r, k in zip(x, rate, n, strict=True):
         ax1.text(xi, r + 0.02, f"n={k}", ha="center", fontsize=7)
@@ -290,8 +349,13 @@ def _plot(trials: list[dict[str, Any]], path: Path) -> Path:
     causes = [c for c in CAUSES if any(not t.get("success") and t.get("cause") == c for t in trials)]
     bottom = np.zeros(len(families))
     for c in causes:
-        k = np.array([sum(1 for t in trials if t["family"] == f and not t.get("success") and t.get("cause") == c)
-                      for f in families], float)
+        k = np.array(
+            [
+                sum(1 for t in trials if t["family"] == f and not t.get("success") and t.get("cause") == c)
+                for f in families
+            ],
+            float,
+        )
         ax2.bar(x, k, bottom=bottom, label=c)
         bottom += k
     ax2.set_xticks(x, families, rotation=40, ha="right", fontsize=8)

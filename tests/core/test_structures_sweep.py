@@ -18,41 +18,88 @@ ROOT = Path(__file__).resolve().parents[2]
 # of docs/results/structures_corpus.md, the cycle-time bench, the bad-input tests) and from the planner's own
 # phrasing (plugins/planners/regrasp, core/pipeline/) where no run at hand failed that way.
 REAL_REASONS = [
-    ("detect", "hex_peg not found: 'hex_peg' not found: best hypothesis rejected (ambiguous: a pose 0 mm and 9 deg "
-     "away explains the view as well (score 0.963 vs 0.964); the part is nearly symmetric and this view misses the "
-     "difference)", "detect_ambiguous"),
-    ("detect", "dovetail_through_block not found: 'dovetail_through_block' not found: best hypothesis rejected (the "
-     "part would rest 15.6 mm inside the table)", "detect_not_found"),
-    ("detect", "round_post_on_base not found: 'round_post_on_base' not found: best hypothesis rejected (fitness 0.94 "
-     "< 0.95)", "detect_not_found"),
+    (
+        "detect",
+        "hex_peg not found: 'hex_peg' not found: best hypothesis rejected (ambiguous: a pose 0 mm and 9 deg "
+        "away explains the view as well (score 0.963 vs 0.964); the part is nearly symmetric and this view misses the "
+        "difference)",
+        "detect_ambiguous",
+    ),
+    (
+        "detect",
+        "dovetail_through_block not found: 'dovetail_through_block' not found: best hypothesis rejected (the "
+        "part would rest 15.6 mm inside the table)",
+        "detect_not_found",
+    ),
+    (
+        "detect",
+        "round_post_on_base not found: 'round_post_on_base' not found: best hypothesis rejected (fitness 0.94 < 0.95)",
+        "detect_not_found",
+    ),
     ("execute", "close on round_side_pin: the fingers did not close on the part", "execution_drop"),
-    ("measure", "assembled outside tolerance: B in A off by 7.50 mm / 0.32 deg (limits 2.0 mm / 2.0 deg), A 0.53 mm "
-     "from its goal (limit 3.0 mm)", "off_goal"),
-    ("measure", "assembled outside tolerance: B in A off by 0.65 mm / 2.55 deg (limits 2.0 mm / 2.0 deg), A 1.52 mm "
-     "from its goal (limit 3.0 mm); round_peg was pushed 7.5 mm in the hand by 'insert round_peg at assembled' (it "
-     "met resistance there: a jam, if that is the insertion)", "jam"),
-    ("measure", "assembled outside tolerance: B in A off by 83.51 mm / 5.18 deg (limits 2.0 mm / 2.0 deg), A 82.53 mm "
-     "from its goal (limit 3.0 mm); t_slot_stopped_block was pushed 2.3 mm in the hand by 'place t_slot_stopped_block "
-     "at goal' (it met resistance there: a jam, if that is the insertion)", "off_goal"),
-    ("plan", "part B (round_side_pin): 40 keyframe sequences tried (max_attempts); last failure: insertion at "
-     "assembled: collision at step 9 (LARM_FINGER0_Link/side_holed_block, LARM_FINGER1_Link/side_holed_block)",
-     "motion"),
-    ("plan", "part B (round_side_pin): no grasp is shared between the start and goal layers, even through "
-     "intermediate placements; last motion failure: insertion at assembled: collision at step 10 "
-     "(RARM_FINGER1_Link/side_holed_block)", "regrasp_graph"),
+    (
+        "measure",
+        "assembled outside tolerance: B in A off by 7.50 mm / 0.32 deg (limits 2.0 mm / 2.0 deg), A 0.53 mm "
+        "from its goal (limit 3.0 mm)",
+        "off_goal",
+    ),
+    (
+        "measure",
+        "assembled outside tolerance: B in A off by 0.65 mm / 2.55 deg (limits 2.0 mm / 2.0 deg), A 1.52 mm "
+        "from its goal (limit 3.0 mm); round_peg was pushed 7.5 mm in the hand by 'insert round_peg at assembled' (it "
+        "met resistance there: a jam, if that is the insertion)",
+        "jam",
+    ),
+    (
+        "measure",
+        "assembled outside tolerance: B in A off by 83.51 mm / 5.18 deg (limits 2.0 mm / 2.0 deg), A 82.53 mm "
+        "from its goal (limit 3.0 mm); t_slot_stopped_block was pushed 2.3 mm in the hand by 'place t_slot_stopped_block "
+        "at goal' (it met resistance there: a jam, if that is the insertion)",
+        "off_goal",
+    ),
+    (
+        "plan",
+        "part B (round_side_pin): 40 keyframe sequences tried (max_attempts); last failure: insertion at "
+        "assembled: collision at step 9 (LARM_FINGER0_Link/side_holed_block, LARM_FINGER1_Link/side_holed_block)",
+        "motion",
+    ),
+    (
+        "plan",
+        "part B (round_side_pin): no grasp is shared between the start and goal layers, even through "
+        "intermediate placements; last motion failure: insertion at assembled: collision at step 10 "
+        "(RARM_FINGER1_Link/side_holed_block)",
+        "regrasp_graph",
+    ),
     ("teach", "internal error (ValueError: no viewing direction shows markers of both parts)", "teach"),
     ("grasps", "no force-closure grasp of u_bracket for this hand", "no_grasp"),
     ("plan", "hex_peg: no grasp is feasible at the start pose (IK or collision)", "no_grasp"),
-    ("plan", "block: no grasp is shared between the start and goal layers, even through intermediate placements",
-     "regrasp_graph"),
-    ("plan", "round_peg: time budget of 120 s (wall clock) spent after 3 keyframe sequences; last failure: transit "
-     "left: T-RRT found no path", "regrasp_graph"),
-    ("plan", "round_peg: 8 keyframe sequences tried (max_attempts); last failure: approach right: goal invalid",
-     "motion"),
-    ("look_again", "block is not at its goal (4.2 mm / 3.1 deg off) and planning again failed: block: no grasp is "
-     "feasible at the goal pose (IK or collision)", "no_grasp"),
-    ("look_again", "block not found again at its goal: 'block' not found: best hypothesis rejected (fitness 0.91 < "
-     "0.95)", "detect_not_found"),
+    (
+        "plan",
+        "block: no grasp is shared between the start and goal layers, even through intermediate placements",
+        "regrasp_graph",
+    ),
+    (
+        "plan",
+        "round_peg: time budget of 120 s (wall clock) spent after 3 keyframe sequences; last failure: transit "
+        "left: T-RRT found no path",
+        "regrasp_graph",
+    ),
+    (
+        "plan",
+        "round_peg: 8 keyframe sequences tried (max_attempts); last failure: approach right: goal invalid",
+        "motion",
+    ),
+    (
+        "look_again",
+        "block is not at its goal (4.2 mm / 3.1 deg off) and planning again failed: block: no grasp is "
+        "feasible at the goal pose (IK or collision)",
+        "no_grasp",
+    ),
+    (
+        "look_again",
+        "block not found again at its goal: 'block' not found: best hypothesis rejected (fitness 0.91 < 0.95)",
+        "detect_not_found",
+    ),
 ]
 
 
@@ -84,16 +131,25 @@ def test_check_refuses_an_unknown_family_before_any_trial(tmp_path: Path) -> Non
         exp.check(exp.Params(family="hex_pegs"))
 
 
-def test_trial_writes_its_structure_and_records_the_named_failure(tmp_path: Path,
-                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+def test_trial_writes_its_structure_and_records_the_named_failure(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     seen: dict = {}
 
     def fake_run(cfg, out_dir, pm=None):
         seen.update(seed=cfg.seed, animation=cfg.execution.animation, out=out_dir)
         reason = REAL_REASONS[1][1]
-        return RunReport(config={}, seed=cfg.seed, success=False, failed_stage="detect", reason=reason,
-                         stages=[StageOutcome(stage="teach", ok=True, seconds=2.0),
-                                 StageOutcome(stage="detect", ok=False, seconds=9.5, reason=reason)])
+        return RunReport(
+            config={},
+            seed=cfg.seed,
+            success=False,
+            failed_stage="detect",
+            reason=reason,
+            stages=[
+                StageOutcome(stage="teach", ok=True, seconds=2.0),
+                StageOutcome(stage="detect", ok=False, seconds=9.5, reason=reason),
+            ],
+        )
 
     monkeypatch.setattr(pipeline, "run_pipeline", fake_run)
     exp = StructuresCorpus(tmp_path)
