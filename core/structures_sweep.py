@@ -11,9 +11,10 @@ experiment's trial code (:func:`asmteach.core.end_to_end.run_config_trial`).
 Recorded per trial: the family and structure name, its clearance (mm) and
 marker counts; success; the achieved error of B in A against the taught pose
 (mm, deg, modulo the parts' symmetries, as the report gives it); the failed
-stage and the failure reason **as the report states it**; a failure-cause
-category drawn from that reason (:func:`failure_cause`, one of
-:data:`CAUSES`); whether the reason names a cause at all (``cause_named``:
+stage and the failure reason **as the report states it**; the failure
+cause (one of :data:`CAUSES`) as the report records it (``failure_cause``,
+decided by the failing stage; a report written before it existed is
+classified from its reason by :func:`failure_cause`); whether the reason names a cause at all (``cause_named``:
 false for a bare "N mm off" at measure, a defect by issue 23's item 5); the
 computer's seconds per stage and the robot's seconds of simulated motion.
 
@@ -34,27 +35,15 @@ from pydantic import Field
 
 from asmteach.core.config import check_overrides
 from asmteach.core.errors import UserError
+from asmteach.core.failures import FailureCause
 from asmteach.core.io import write_text
 from asmteach.core.models import StrictModel
 from asmteach.core.sweep import Experiment
 
-__all__ = ["CAUSES", "StructuresCorpus", "StructuresCorpusParams", "cause_named", "failure_cause"]
+__all__ = ["CAUSES", "StructuresCorpus", "StructuresCorpusParams", "cause_named", "failure_cause", "trial_cause"]
 
-CAUSES: tuple[str, ...] = (
-    "teach",
-    "detect_not_found",
-    "detect_ambiguous",
-    "correct",
-    "no_grasp",
-    "regrasp_graph",
-    "motion",
-    "execution_drop",
-    "jam",
-    "topple",
-    "off_goal",
-    "other",
-)
-"""Failure-cause categories, in pipeline order; ``other`` is anything the classifier does not recognise."""
+CAUSES: tuple[str, ...] = tuple(c.value for c in FailureCause)
+"""Failure-cause categories, in pipeline order: the values of :class:`asmteach.core.failures.FailureCause`."""
 
 
 class StructuresCorpusParams(StrictModel):
@@ -81,6 +70,10 @@ _PLAN_STAGES = ("plan", "grasps")
 
 def failure_cause(stage: str, reason: str) -> str:
     """The cause category (one of :data:`CAUSES`) of a failed run, from the report's failed stage and reason.
+
+    Only the fallback for reports written before ``report.json`` recorded its
+    ``failure_cause`` (rows of a resumed sweep logged then): a run now names
+    its cause where it fails, and :func:`trial_cause` takes that one.
 
     The reason is read as the pipeline and its plugins phrase it (``"<part> not
     found: ... ambiguous ..."``, ``"no grasp is feasible at the start pose"``,
@@ -135,6 +128,15 @@ def failure_cause(stage: str, reason: str) -> str:
     return "other"
 
 
+def trial_cause(row: dict[str, Any]) -> str:
+    """A failed trial's cause: the report's ``failure_cause`` when it has one, else read from its stage and reason
+    (:func:`failure_cause`, for rows logged before reports recorded it)."""
+    recorded = row.get("failure_cause")
+    if recorded in CAUSES:
+        return str(recorded)
+    return failure_cause(row.get("failed_stage", ""), row.get("reason", ""))
+
+
 _BARE_OFF_GOAL = re.compile(r"^assembled outside tolerance: b in a off by [^;]*$")
 
 
@@ -187,15 +189,14 @@ class StructuresCorpus(Experiment):
             "markers_b": len(gs.markers_b),
             "variant": next((str(gs.params[k]) for k in ("hole", "slot", "pin", "post") if k in gs.params), ""),
         }
-        _, row = run_config_trial(config, params.overrides, seed, workdir)
+        report, row = run_config_trial(config, params.overrides, seed, workdir)
         out = {**base, **row}
         if row["success"]:
             out.update(cause="", cause_named=True)
         else:
-            out.update(
-                cause=failure_cause(row["failed_stage"], row["reason"]),
-                cause_named=cause_named(row["failed_stage"], row["reason"]),
-            )
+            cause = report.failure_cause
+            out["failure_cause"] = cause.value if cause is not None else ""
+            out.update(cause=trial_cause(out), cause_named=cause_named(row["failed_stage"], row["reason"]))
         return out
 
     def summarize(self, rows: list[dict[str, Any]], out_dir: Path) -> list[Path]:
@@ -223,8 +224,9 @@ def _trial_record(row: dict[str, Any]) -> dict[str, Any]:
             "cause_named": True,
         }
     elif not m.get("success"):
-        # classified again from the report's reason: a sharper classifier applies to the rows logged before it
-        m["cause"] = failure_cause(m.get("failed_stage", ""), m.get("reason", ""))
+        # the report's recorded cause; a row logged before reports recorded one is classified again from its
+        # reason, so a sharper classifier applies to it too
+        m["cause"] = trial_cause(m)
         m["cause_named"] = cause_named(m.get("failed_stage", ""), m.get("reason", ""))
     m["seed"] = row.get("seed")
     return m

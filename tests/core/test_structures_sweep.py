@@ -1,4 +1,5 @@
-"""The structures_corpus experiment: cause classifier on real report reasons, one trial's files, the CI subset."""
+"""The structures_corpus experiment: the report's recorded cause, the classifier of old reports' reasons, one
+trial's files, the CI subset."""
 
 from __future__ import annotations
 
@@ -9,8 +10,16 @@ import pytest
 
 from asmteach.core import pipeline
 from asmteach.core.errors import UserError
+from asmteach.core.failures import FailureCause
 from asmteach.core.models import RunReport, StageOutcome
-from asmteach.core.structures_sweep import CAUSES, StructuresCorpus, cause_named, failure_cause
+from asmteach.core.structures_sweep import (
+    CAUSES,
+    StructuresCorpus,
+    _trial_record,
+    cause_named,
+    failure_cause,
+    trial_cause,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -53,8 +62,8 @@ REAL_REASONS = [
     (
         "measure",
         "assembled outside tolerance: B in A off by 83.51 mm / 5.18 deg (limits 2.0 mm / 2.0 deg), A 82.53 mm "
-        "from its goal (limit 3.0 mm); t_slot_stopped_block was pushed 2.3 mm in the hand by 'place t_slot_stopped_block "
-        "at goal' (it met resistance there: a jam, if that is the insertion)",
+        "from its goal (limit 3.0 mm); t_slot_stopped_block was pushed 2.3 mm in the hand by "
+        "'place t_slot_stopped_block at goal' (it met resistance there: a jam, if that is the insertion)",
         "off_goal",
     ),
     (
@@ -115,6 +124,26 @@ def test_unknown_stage_or_reason_is_other() -> None:
     assert failure_cause("", "") == "other"
 
 
+def test_the_causes_are_the_enums_values_in_pipeline_order() -> None:
+    assert CAUSES == tuple(c.value for c in FailureCause)
+    assert CAUSES[0] == "teach" and CAUSES[-1] == "other" and len(CAUSES) == 12
+
+
+def test_the_recorded_cause_wins_over_the_reasons_keywords_and_old_rows_are_still_classified() -> None:
+    jam_words = REAL_REASONS[5][1]  # "... a jam, if that is the insertion" after an insertion's label
+    new = {"failed_stage": "measure", "reason": jam_words, "failure_cause": "off_goal"}
+    old = {"failed_stage": "measure", "reason": jam_words}  # a row logged before reports recorded the cause
+    assert trial_cause(new) == "off_goal"
+    assert trial_cause(old) == "jam"
+    assert trial_cause({**old, "failure_cause": ""}) == "jam"  # a success's empty cause never decides a failure
+    # a resumed sweep's summary: each row's cause is taken again, the recorded one first
+    rows = [
+        {"ok": True, "seed": 1, "point": {}, "metrics": {"success": False, **new}},
+        {"ok": True, "seed": 2, "point": {}, "metrics": {"success": False, **old}},
+    ]
+    assert [_trial_record(r)["cause"] for r in rows] == ["off_goal", "jam"]
+
+
 def test_a_bare_off_goal_reason_names_no_cause() -> None:
     bare = REAL_REASONS[4][1]
     with_jam = REAL_REASONS[5][1]
@@ -145,6 +174,8 @@ def test_trial_writes_its_structure_and_records_the_named_failure(
             success=False,
             failed_stage="detect",
             reason=reason,
+            # the detection listed rival poses: its reason reads "not found", the stage's cause says ambiguous
+            failure_cause=FailureCause.DETECT_AMBIGUOUS,
             stages=[
                 StageOutcome(stage="teach", ok=True, seconds=2.0),
                 StageOutcome(stage="detect", ok=False, seconds=9.5, reason=reason),
@@ -160,7 +191,9 @@ def test_trial_writes_its_structure_and_records_the_named_failure(
     assert {p.name for p in files.iterdir()} == {"A.stl", "B.stl", "structure.yaml", "run.yaml"}
     assert "seed: 8" in (files / "run.yaml").read_text()
     assert row["family"] == "dovetail_slide" and row["structure"] == "gen_dovetail_slide_s3_1"
-    assert row["failed_stage"] == "detect" and row["cause"] == "detect_not_found" and row["cause_named"]
+    assert failure_cause("detect", REAL_REASONS[1][1]) == "detect_not_found"  # what its words would say
+    assert row["failed_stage"] == "detect" and row["cause"] == "detect_ambiguous" and row["cause_named"]
+    assert row["failure_cause"] == "detect_ambiguous"
     assert row["reason"] == REAL_REASONS[1][1] and row["teach_seconds"] == 2.0 and row["detect_seconds"] == 9.5
     # the same params write the same bytes
     first = (files / "A.stl").read_bytes()
@@ -183,7 +216,7 @@ def test_ci_subset_runs_through_asmteach_sweep(tmp_path: Path) -> None:
             # a failure names its stage, its reason and a cause category; "other" only with a reason to read
             assert m["failed_stage"] and m["reason"] and m["cause"] in CAUSES, m
             assert m["cause"] != "other", m
-            assert failure_cause(m["failed_stage"], m["reason"]) == m["cause"]
+            assert m["failure_cause"] == m["cause"]  # the report's own, not read from its words
         assert m["teach_seconds"] >= 0.0
     for name in ("structures_corpus.md", "structures_corpus.png", "trials.csv", "summary.md"):
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
