@@ -28,7 +28,8 @@ def format_summary(report: RunReport) -> str:
         lines = [f"{name} (seed {report.seed}): SUCCESS"]
     else:
         lines = [f"{name} (seed {report.seed}): FAILED at {report.failed_stage or '?'}"]
-        lines.append(f"  reason: {report.reason or 'not recorded'}")
+        cause = f" ({report.failure_cause.value})" if report.failure_cause is not None else ""
+        lines.append(f"  reason{cause}: {report.reason or 'not recorded'}")
     if report.stages:
         lines.append("stages:")
         stages = report.stages[:8]

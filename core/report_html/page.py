@@ -113,7 +113,11 @@ def _header(report: RunReport) -> str:
     else:
         stage = report.failed_stage or "unknown stage"
         status = f'<span class="status bad">FAILED at {_e(stage)}</span>'
-        reason = f'<p class="reason"><b>Reason:</b> {_e(report.reason or "not recorded")}</p>'
+        cause = report.failure_cause.value if report.failure_cause is not None else "not recorded"
+        reason = (
+            f'<p class="reason"><b>Cause:</b> <code>{_e(cause)}</code> · '
+            f"<b>Reason:</b> {_e(report.reason or 'not recorded')}</p>"
+        )
     total = sum(s.seconds for s in report.stages)
     meta = f"seed {report.seed} · {len(report.stages)} stages · computer {total:.2f} s"
     robot = robot_clock(report)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from asmteach.core import geometry
+from asmteach.core.failures import FailureCause
 from asmteach.core.models import (
     AssemblyTask,
     Detection,
@@ -64,6 +65,7 @@ def _report(tmp_path, **overrides):
         success=False,
         failed_stage="plan",
         reason="IK failed at keyframe 'pre-insert' <arm=left>",
+        failure_cause=FailureCause.MOTION,
         stages=[
             StageOutcome(stage="teach", ok=True, seconds=1.234, details={"frames": 30}),
             StageOutcome(stage="plan", ok=False, seconds=0.5, reason="no IK <left>", details={"keyframe": "pre"}),
@@ -151,6 +153,7 @@ def test_report_html_is_self_contained_well_formed_and_escaped(tmp_path, png):
     assert "&lt;arm=left&gt;" in text and "note &lt;b&gt;" in text
     words = " ".join(parser.text)
     assert "FAILED at plan" in words and "IK failed at keyframe 'pre-insert' <arm=left>" in words
+    assert "Cause: motion · Reason: IK failed" in re.sub(r"\s+", " ", words)  # the cause beside the reason
 
     # the numbers: taught pose in mm / deg, unit v_a, detection errors against the true pose
     assert "+10.00, +20.00, +30.00" in words and "+10.00, +0.00, +90.00" in words
@@ -174,7 +177,7 @@ def test_report_without_task_detections_or_figures_still_renders(tmp_path):
 def test_format_summary_fits_one_screen(tmp_path):
     text = format_summary(_report(tmp_path, artefacts={"html": "report.html"}))
     lines = text.splitlines()
-    assert lines[0].endswith("(seed 3): FAILED at plan") and "IK failed at keyframe" in lines[1]
+    assert lines[0].endswith("(seed 3): FAILED at plan") and lines[1].startswith("  reason (motion): IK failed at")
     assert any("a: [" in ln and "error 1.00 mm / 2.00 deg" in ln for ln in lines)
     assert any("b: not found (no view matched" in ln for ln in lines)
     assert "files: report.html" in lines
@@ -188,3 +191,5 @@ def test_format_summary_fits_one_screen(tmp_path):
     lines = format_summary(big).splitlines()
     assert len(lines) <= 25 and max(map(len, lines)) <= 100
     assert "line one line two" in lines[1]
+    old = format_summary(_report(tmp_path, failure_cause=None)).splitlines()  # a report.json from before causes
+    assert old[1].startswith("  reason: IK failed at")
