@@ -1,0 +1,271 @@
+"""The ``cvfh_icp`` detector's pose search on one cluster: hypotheses, verification rounds, twin passes.
+
+All poses are ``T_world_part`` (world frame, metres, z up). The detector
+(:class:`~asmteach.plugins.detectors.cvfh.detector.CvfhIcpDetector`) pre-scores the hypotheses and calls,
+in order:
+
+* :func:`view_hypotheses`: the nearest database views and their CRH roll peaks turned into poses;
+* :func:`verify_rounds`: coarse ICP, fine ICP and verification of the best pre-scored ones, in rounds of
+  ``icp_candidates`` until one verifies;
+* :func:`hull_twin_pass`: the verified pose turned by each hull twin, the ray evidence choosing;
+* :func:`near_twin_pass`: the pose turned by each near twin and nudge, and the distinct rival that
+  scores as well, if any (the view cannot tell them apart).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from asmteach.core.models import TablePlane
+from asmteach.core.perception.registration import ModelCloud, RefineSettings, Verdict, icp_refine, verify
+from asmteach.core.perception.viewpoint import StageClock
+from asmteach.plugins.detectors.cvfh.prescore import SampleIndex, near_shares, support_gap
+from asmteach.plugins.detectors.cvfh.resting import disagreement
+from asmteach.plugins.detectors.cvfh.settings import CvfhSettings
+from asmteach.plugins.detectors.cvfh.views import CloudDescription, ViewDatabase
+
+__all__ = [
+    "ClusterJob",
+    "Prepared",
+    "hull_twin_pass",
+    "is_distinct",
+    "near_twin_pass",
+    "poses_apart",
+    "verify_rounds",
+    "view_hypotheses",
+]
+
+
+@dataclass
+class Prepared:
+    """What the detector builds once per part (see :meth:`CvfhIcpDetector.prepare`)."""
+
+    model: ModelCloud
+    db: ViewDatabase
+    diameter: float
+    built_now: bool
+    build_ms: float
+    rests: np.ndarray
+    """(k, 4, 4) stable rests on z = 0 (see :func:`stable_rests`)."""
+    twins: list[np.ndarray]
+    """Part-frame rotations keeping the convex hull but not the part (see :func:`hull_twins`)."""
+    near: list[np.ndarray]
+    """Part-frame rotations keeping the part nearly (see :func:`near_twins`)."""
+    own: list[np.ndarray]
+    """The part's own symmetries (poses that differ by one are the same pose)."""
+    samples: SampleIndex
+    """The model's surface samples indexed for the pre-score's distance tests."""
+
+
+@dataclass
+class ClusterJob:
+    """One observed cluster and what its hypotheses are checked against (world frame, metres)."""
+
+    cluster: np.ndarray
+    context: np.ndarray
+    icp_in: np.ndarray
+    icp_sub: np.ndarray
+    table: TablePlane
+    eye: np.ndarray
+    judged: list[np.ndarray] = field(default_factory=list)
+    """Poses the hull-twin pass verified and judged by the ray evidence (the near-twin pass leaves them alone)."""
+    icp_passes: int = 0
+    """Open3D ICP runs so far (a coarse + fine refinement is two): the detection's main cost."""
+
+    def icp(
+        self, points: np.ndarray, model: ModelCloud, T_world_part: np.ndarray, s: RefineSettings, **passes: bool
+    ) -> np.ndarray:
+        """:func:`icp_refine` of ``points`` (world, metres), counted in :attr:`icp_passes`."""
+        self.icp_passes += passes.get("coarse", True) + passes.get("fine", True)
+        return icp_refine(points, model, T_world_part, s, **passes)
+
+
+def view_hypotheses(
+    desc: CloudDescription, db: ViewDatabase, T_world_vcam: np.ndarray, s: CvfhSettings
+) -> list[tuple[int, np.ndarray, float]]:
+    """``(view, T_world_part, roll)`` from the nearest views and their CRH roll peaks."""
+    from asmteach.plugins.detectors.cvfh.descriptors import crh_roll_candidates
+
+    # L1 distance between every cluster region and every view region; a view scores its best pair.
+    d = np.abs(desc.hists[:, None, :] - db.hists[None, :, :]).sum(axis=2).min(axis=0)
+    view_best = np.full(len(db.T_acam_part), np.inf)
+    np.minimum.at(view_best, db.region_view, d)
+    order = [int(i) for i in np.argsort(view_best) if np.isfinite(view_best[i])][: s.nn_views]
+    out: list[tuple[int, np.ndarray, float]] = []
+    for i in order:
+        if desc.crh is None or not np.any(db.crh[i]):
+            # A face seen head-on has no roll histogram: try rolls all round instead.
+            rolls = list(np.linspace(-np.pi, np.pi, s.blind_rolls, endpoint=False))
+        else:
+            # The roll that turns the view into the cluster (view a -> cluster b).
+            rolls = crh_roll_candidates(db.crh[i], desc.crh, max_peaks=s.max_rolls)
+        for roll in rolls:
+            # Cluster ~ Rz(roll) view, both centroids on +z: rotate about the view centroid, then move it.
+            # (Rz written out: scipy's Rotation per roll was 4 % of detect.)
+            c, s_ = np.cos(roll), np.sin(roll)
+            T_align = np.eye(4)
+            T_align[:3, :3] = [[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]]
+            T_align[:3, 3] = desc.centroid - T_align[:3, :3] @ db.centroids[i]
+            out.append((i, T_world_vcam @ T_align @ db.T_acam_part[i], float(roll)))
+    return out
+
+
+def verify_rounds(
+    scored: list[tuple[int, np.ndarray, float]],
+    job: ClusterJob,
+    prep: Prepared,
+    clock: StageClock,
+    s: CvfhSettings,
+    max_rounds: int | None = None,
+) -> tuple[Verdict | None, Verdict | None, dict]:
+    """Refine and verify pre-scored hypotheses in rounds until one verifies: ``(best, closest miss, info)``.
+
+    At most ``max_rounds`` rounds (default: the ``max_rounds`` setting).
+    """
+    max_rounds = s.max_rounds if max_rounds is None else max_rounds
+    best: Verdict | None = None
+    closest: Verdict | None = None
+    info: dict = {}
+    rounds = 0
+    # Rounds of icp_candidates hypotheses, best pre-scored first; later rounds only when nothing verified.
+    for first in range(0, min(len(scored), max_rounds * s.icp_candidates), s.icp_candidates):
+        rounds += 1
+        # Coarse ICP on a subsample for every candidate, fine ICP and verification for the best few.
+        batch = scored[first : first + s.icp_candidates]
+        Ts = [job.icp(job.icp_sub, prep.model, T0, s.refine, fine=False) for _, T0, _ in batch]
+        coarse = []
+        shares = near_shares(Ts, job.icp_sub, prep.model, s.refine.inlier_distance, prep.samples)
+        for (view, _, roll), T, share in zip(batch, Ts, shares, strict=True):
+            score = float(share)
+            if abs(support_gap(T, prep.model, job.table)) > 2.0 * s.refine.support_tolerance:
+                score -= 1.0  # resting inside the table or floating: last in line
+            coarse.append((score, view, T, roll))
+        coarse.sort(key=lambda c: -c[0])
+        clock.lap("icp")
+        accepted = 0
+        for _, view, T1, roll in coarse[: s.verify_candidates]:
+            if accepted >= 2:
+                break  # two verified poses are enough to pick the better of a near-symmetric pair
+            T = job.icp(job.icp_in, prep.model, T1, s.refine, coarse=False)
+            clock.lap("icp")
+            v = verify(T, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+            clock.lap("verify")
+            accepted += v.accepted
+            if v.accepted and (best is None or v.score > best.score):
+                best = v
+                info = {"view": int(view), "roll_deg": round(float(np.degrees(roll)), 2)}
+            if closest is None or v.score > closest.score:
+                closest = v
+        if best is not None:
+            break
+    info["rounds"] = rounds
+    return best, closest, info
+
+
+def hull_twin_pass(
+    best: Verdict, job: ClusterJob, prep: Prepared, clock: StageClock, s: CvfhSettings
+) -> tuple[Verdict, int, list[dict]]:
+    """Try ``best`` turned by each hull twin; keep the pose the disagreement evidence favours.
+
+    Returns the chosen verdict, the number of twins that verified, and the
+    twins the view cannot tell from it (pose, scores, evidence), for the report.
+    """
+    verified, undecided = 0, []
+    for S in prep.twins:
+        T = job.icp(job.icp_in, prep.model, best.T_world_part @ S, s.refine, coarse=False)
+        v = verify(T, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+        clock.lap("verify")
+        if not v.accepted:
+            continue
+        verified += 1
+        job.judged += [T, best.T_world_part]
+        ev = disagreement(best.T_world_part, T, job.cluster, job.eye, prep.model, s.twin_fit, s.twin_off)
+        verdict = ev.verdict(s.twin_min_points, s.twin_ratio)
+        if verdict == "b" or (verdict == "ambiguous" and v.score > best.score):
+            best, v = v, best
+        if verdict == "ambiguous":
+            undecided.append(v)
+    # the evidence is stated against the final choice
+    ambiguous = []
+    for v in undecided:
+        ev = disagreement(best.T_world_part, v.T_world_part, job.cluster, job.eye, prep.model, s.twin_fit, s.twin_off)
+        ambiguous.append(
+            {
+                "T_world_part": v.T_world_part.tolist(),
+                "fitness": round(v.fitness, 4),
+                "violation": round(v.violation, 4),
+                "points_against": [ev.against_a, ev.against_b],
+            }
+        )
+    clock.lap("verify")
+    return best, verified, ambiguous
+
+
+def near_twin_pass(
+    best: Verdict, job: ClusterJob, prep: Prepared, clock: StageClock, s: CvfhSettings
+) -> tuple[Verdict, Verdict | None]:
+    """Try ``best`` turned by each near twin: ``(the best-scoring verified pose, a distinct rival or None)``.
+
+    A rival is a verified pose, distinct from the winner (beyond the part's
+    own symmetries), scoring within ``ambiguity_margin`` of it, that the
+    disagreement evidence (``near_fit``, ``near_off``) does not rule out.
+    """
+    found = [best]
+    # Hull twins the hull pass verified were judged there (found with details["ambiguous"] when the view
+    # cannot tell); the ones it could not verify (its ICP is fine-only) get a full ICP here.
+    judged = list(job.judged)
+    screen = s.refine.model_copy(update={"icp_iterations": s.near_screen_iterations})
+    screen = screen if s.near_screen_iterations > 0 else None
+    for S in prep.near:
+        T0 = best.T_world_part @ S
+        tried = [v.T_world_part for v in found] + judged
+        # 3 in 4 turned poses fall back onto a pose already tried (the found one): a full ICP from them costs
+        # 4-6x a short coarse one, which already brings them within a few mm / deg of it.
+        if screen is not None and not is_distinct(
+            job.icp(job.icp_sub, prep.model, T0, screen, fine=False), tried, prep.own, s, 0.5
+        ):
+            clock.lap("icp")
+            continue
+        T = job.icp(job.icp_in, prep.model, T0, s.refine)
+        clock.lap("icp")
+        if not is_distinct(T, tried, prep.own, s):
+            continue  # ICP pulled it back onto a pose already tried
+        v = verify(T, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+        clock.lap("verify")
+        if v.accepted:
+            found.append(v)
+    found.sort(key=lambda v: -v.score)
+    winner = found[0]
+    for v in found[1:]:
+        if winner.score - v.score > s.ambiguity_margin or not is_distinct(
+            v.T_world_part, [winner.T_world_part], prep.own, s
+        ):
+            continue
+        ev = disagreement(winner.T_world_part, v.T_world_part, job.cluster, job.eye, prep.model, s.near_fit, s.near_off)
+        if ev.verdict(s.twin_min_points, s.twin_ratio) != "a":
+            return winner, v
+    return winner, None
+
+
+def poses_apart(A: np.ndarray, B: np.ndarray, own: list[np.ndarray]) -> tuple[float, float]:
+    """``(mm, deg)`` between two poses, the nearest of ``B``'s symmetric equivalents ``B @ S``."""
+    BS = np.einsum("ij,sjk->sik", B, np.asarray(own).reshape(-1, 4, 4))
+    mm = 1000.0 * np.linalg.norm(BS[:, :3, 3] - A[:3, 3], axis=1)
+    cos = (np.einsum("ij,sij->s", A[:3, :3], BS[:, :3, :3]) - 1.0) / 2.0
+    deg = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    i = int(np.argmin(mm + deg))
+    return float(mm[i]), float(deg[i])
+
+
+def is_distinct(
+    T: np.ndarray, others: list[np.ndarray], own: list[np.ndarray], s: CvfhSettings, scale: float = 1.0
+) -> bool:
+    """Whether ``T`` is farther than ``scale * distinct_mm`` or turned more than ``scale * distinct_deg`` from
+    every other."""
+    for O in others:
+        mm, deg = poses_apart(T, O, own)
+        if mm <= scale * s.distinct_mm and deg <= scale * s.distinct_deg:
+            return False
+    return True
