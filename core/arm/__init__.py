@@ -3,7 +3,9 @@
 Robot plugins build on it (the Nextage, ``urdf_arm``); it depends on the core only:
 
 - :mod:`~asmteach.core.arm.robot`: :class:`ArmRobot` (a :class:`~asmteach.core.interfaces.Robot` and
-  :class:`~asmteach.core.robot.World`), its settings, :class:`ArmSpec` (one arm as a subclass describes it);
+  :class:`~asmteach.core.robot.World`) and :class:`ArmSpec` (one arm as a subclass describes it);
+- :mod:`~asmteach.core.arm.settings`: :class:`ArmRobotSettings` (the keys every arm robot shares) and its
+  :class:`CameraMount`;
 - :mod:`~asmteach.core.arm.scene`: :class:`ArmScene`, its :class:`~asmteach.core.robot.PlanningScene`;
 - :mod:`~asmteach.core.arm.kinematics`: URDF kinematics (arm chains, joint limits, FK, Jacobian, IK entry point);
 - :mod:`~asmteach.core.arm.dls_ik`: the damped-least-squares IK solver and its settings;

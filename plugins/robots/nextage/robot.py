@@ -33,7 +33,8 @@ import numpy as np
 from pydantic import Field
 
 from asmteach.core import geometry
-from asmteach.core.arm.robot import ArmRobot, ArmRobotSettings, ArmSpec
+from asmteach.core.arm.robot import ArmRobot, ArmSpec
+from asmteach.core.arm.settings import ArmRobotSettings
 from asmteach.core.arm.sim_gripper import GripperJoints
 from asmteach.core.errors import UserError
 from asmteach.core.models import Mat4

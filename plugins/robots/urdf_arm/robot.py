@@ -38,7 +38,8 @@ from pathlib import Path
 import numpy as np
 from pydantic import Field, model_validator
 
-from asmteach.core.arm.robot import ArmRobot, ArmRobotSettings, ArmSpec
+from asmteach.core.arm.robot import ArmRobot, ArmSpec
+from asmteach.core.arm.settings import ArmRobotSettings
 from asmteach.core.arm.sim_gripper import GripperJoints
 from asmteach.core.errors import UserError
 from asmteach.core.models import HandSpec, Mat4, StrictModel

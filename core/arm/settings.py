@@ -1,0 +1,44 @@
+"""Settings every simulated arm robot shares (:class:`ArmRobotSettings`) and where its camera sits.
+
+The robot plugins that build on :class:`~asmteach.core.arm.robot.ArmRobot`
+(the Nextage, ``urdf_arm``) subclass :class:`ArmRobotSettings` with their own keys.
+"""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from asmteach.core.arm.dls_ik import IKSettings
+from asmteach.core.arm.sim import POSITION_GAIN
+from asmteach.core.models import StrictModel
+
+__all__ = ["ArmRobotSettings", "CameraMount"]
+
+
+class CameraMount(StrictModel):
+    """Where the simulated depth/RGB camera sits (world x, y; z above the table top; metres)."""
+
+    eye: tuple[float, float, float] = Field((1.05, 0.0, 0.75), description="camera position; z above the table top")
+    target: tuple[float, float, float] = Field((0.45, 0.0, 0.0), description="point looked at; z above the table")
+
+
+class ArmRobotSettings(StrictModel):
+    """Settings every simulated arm robot shares (metres, radians, seconds, newtons)."""
+
+    table_height: float = Field(0.0, ge=-2.0, le=2.0, description="world z of the table top, metres")
+    table_center: tuple[float, float] = Field((0.45, 0.0), description="table centre x, y (world), metres")
+    table_size: tuple[float, float] = Field((0.6, 1.2), description="table extent along x, y, metres")
+    gui: bool = Field(False, description="open PyBullet's window (needs a display)")
+    ik: IKSettings = Field(default_factory=IKSettings, description="the inverse-kinematics solver")
+    speed_scale: float = Field(1.0, gt=0.0, le=1.0, description="fraction of each joint's speed limit used")
+    jump_tolerance: float = Field(1.05, ge=1.0, description="a trajectory may exceed the speed limits by this factor")
+    start_tolerance: float = Field(0.02, gt=0.0, description="radians between the current q and a trajectory's start")
+    grip_force: float = Field(40.0, gt=0.0, description="finger force, newtons")
+    time_step: float = Field(1.0 / 240.0, gt=0.0, le=0.01, description="physics step, seconds")
+    position_gain: float = Field(
+        POSITION_GAIN,
+        gt=0.0,
+        le=1.0,
+        description="positionGain of the simulated joint servos; PyBullet's default 0.1 leaves ~1 mrad steady error",
+    )
+    camera: CameraMount = Field(default_factory=CameraMount, description="where the simulated camera sits")
