@@ -13,7 +13,7 @@ from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import AssemblyProblem, PartModel, Robot
 from asmteach.core.io import to_jsonable, write_model
 from asmteach.core.models import AssemblyTask, Detection, Plan, TablePlane
-from asmteach.core.pipeline.detect import sense
+from asmteach.core.pipeline.detect import not_found_cause, sense
 from asmteach.core.pipeline.stage import Run, StageFailed
 from asmteach.core.pose_error import nearest_symmetric, pose_error
 
@@ -115,10 +115,9 @@ def look_again_stage(
         det = detect_and_correct(detector, corrector, cloud, a, table, viewpoint=viewpoint)
         if not det.found or det.rough is None:
             if detections[a.name].details.get("ambiguous"):
-                # its first detection listed a twin the view could not rule out, and the goal view finds neither
-                raise StageFailed(
-                    f"{a.name} not found again at its goal: {det.reason}", cause=FailureCause.DETECT_AMBIGUOUS
-                )
+                # The first detection was ambiguous, so going on blind is a guess; the cause is the detection
+                # that failed here (as at the detect stage), which lists rivals only if it too was ambiguous.
+                raise StageFailed(f"{a.name} not found again at its goal: {det.reason}", cause=not_found_cause(det))
             d["not_found"] = det.reason  # nothing to decide: the plan goes on as it was
             return result, rest
         T = det.best
