@@ -29,7 +29,7 @@ Example::
     frame.points_world      # (n, 3) metres, world frame
     frame.write_ply("scene.ply")   # with 'comment viewpoint X Y Z': the camera centre travels with the cloud
 
-A cloud file tells where its camera was (:func:`read_viewpoint`): a PLY by
+A cloud file tells where its camera was (:func:`asmteach.core.clouds.read_cloud`): a PLY by
 the comment line ``comment viewpoint X Y Z`` (camera centre, world frame,
 metres; what :func:`write_cloud_ply` writes), a PCD by its ``VIEWPOINT``
 header (the translation ``tx ty tz``; PCL's default ``0 0 0 1 0 0 0``, which
@@ -48,11 +48,12 @@ from numpy.typing import ArrayLike
 from pydantic import Field
 
 import asmteach.core  # noqa: F401  (loads libusb before open3d)
+from asmteach.core.clouds.read import PLY_VIEWPOINT
 from asmteach.core.models import CameraIntrinsics, StrictModel
 
 import open3d as o3d  # isort: skip  (after asmteach.core)
 
-__all__ = ["DepthCamera", "DepthFrame", "KinectSettings", "look_at", "read_viewpoint", "write_cloud_ply"]
+__all__ = ["DepthCamera", "DepthFrame", "KinectSettings", "look_at", "write_cloud_ply"]
 
 
 class KinectSettings(StrictModel):
@@ -135,15 +136,13 @@ class DepthFrame:
         return write_cloud_ply(path, self.points_world, self.viewpoint)
 
 
-PLY_VIEWPOINT = "comment viewpoint"
-"""PLY header line prefix followed by the camera centre ``X Y Z`` (world frame, metres)."""
 
 
 def write_cloud_ply(path: str | Path, points: ArrayLike, viewpoint: ArrayLike | None = None) -> Path:
     """Write ``(n, 3)`` points (world frame, metres) as a binary PLY, with ``comment viewpoint X Y Z`` if given.
 
     Open3D, PCL and MeshLab read it; the comment is how the camera centre
-    reaches ``asmteach detect`` (:func:`read_viewpoint`).
+    reaches ``asmteach detect`` (:func:`asmteach.core.clouds.read_cloud`).
     """
     pts = np.asarray(points, dtype="<f4").reshape(-1, 3)
     lines = ["ply", "format binary_little_endian 1.0"]
@@ -154,43 +153,6 @@ def write_cloud_ply(path: str | Path, points: ArrayLike, viewpoint: ArrayLike | 
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_bytes(("\n".join(lines) + "\n").encode("ascii") + pts.tobytes())
-    return out
-
-
-def read_viewpoint(path: str | Path) -> np.ndarray | None:
-    """Camera centre ``(3,)`` (world frame, metres) a PLY or PCD file's header records, else ``None``.
-
-    PLY: ``comment viewpoint X Y Z``. PCD: ``VIEWPOINT tx ty tz qw qx qy qz``
-    (the translation); the identity ``0 0 0 1 0 0 0`` is PCL's default and
-    says nothing, so it gives ``None``. Raises ``ValueError`` for a viewpoint
-    line that does not hold finite numbers.
-    """
-    p = Path(path)
-    suffix = p.suffix.lower()
-    if suffix not in {".ply", ".pcd"}:
-        return None
-    with p.open("rb") as fh:
-        head = fh.read(65536)
-    for raw in head.split(b"\n"):
-        line = raw.decode("ascii", errors="replace").strip()
-        if (suffix == ".ply" and line == "end_header") or (suffix == ".pcd" and line.startswith("DATA")):
-            return None  # the header ended without a viewpoint
-        if suffix == ".ply" and line.startswith(PLY_VIEWPOINT + " "):
-            values = line[len(PLY_VIEWPOINT):].split()
-            return _finite(values[:3], line, p, 3)
-        if suffix == ".pcd" and line.startswith("VIEWPOINT"):
-            vals = _finite(line.split()[1:], line, p, 7)
-            return None if np.allclose(vals, [0, 0, 0, 1, 0, 0, 0]) else vals[:3]
-    return None
-
-
-def _finite(values: list[str], line: str, path: Path, n: int) -> np.ndarray:
-    try:
-        out = np.array([float(v) for v in values], dtype=float)
-    except ValueError:
-        out = np.array([])
-    if out.shape != (n,) or not np.all(np.isfinite(out)):
-        raise ValueError(f"{path.name}: header line {line!r} should hold {n} finite numbers")
     return out
 
 
