@@ -1,0 +1,38 @@
+"""cvfh pose search: how far apart two poses are, up to the part's own symmetries (mm, deg)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from asmteach.core import geometry
+from asmteach.plugins.detectors.cvfh.pose_search import is_distinct, poses_apart
+from asmteach.plugins.detectors.cvfh.settings import CvfhSettings
+
+
+def _pose(yaw_deg: float, x: float = 0.0) -> np.ndarray:
+    """A turn about world z by ``yaw_deg`` and a shift ``x`` metres along world x."""
+    T = geometry.rot_z(np.radians(yaw_deg))
+    T[0, 3] = x
+    return T
+
+
+def test_apart_measures_millimetres_and_degrees_to_the_nearest_symmetric_equivalent() -> None:
+    mm, deg = poses_apart(_pose(0.0), _pose(30.0, 0.004), [np.eye(4)])
+    assert mm == pytest.approx(4.0) and deg == pytest.approx(30.0)
+    # a part that turns onto itself by 90 deg about z: 95 deg is 5 deg from its equivalent
+    own = [_pose(a) for a in (0.0, 90.0, 180.0, 270.0)]
+    mm, deg = poses_apart(_pose(0.0), _pose(95.0), own)
+    assert mm == pytest.approx(0.0) and deg == pytest.approx(5.0)
+
+
+def test_distinct_needs_to_be_beyond_either_limit_from_every_other_pose() -> None:
+    s = CvfhSettings()  # distinct_mm = distinct_deg = 5
+    own = [np.eye(4)]
+    assert not is_distinct(_pose(4.0, 0.004), [_pose(0.0)], own, s)
+    assert is_distinct(_pose(6.0), [_pose(0.0)], own, s)
+    assert is_distinct(_pose(0.0, 0.006), [_pose(0.0)], own, s)
+    assert not is_distinct(_pose(4.0), [_pose(20.0), _pose(0.0)], own, s)  # near the second
+    # the near-twin screen asks at half the limits
+    assert is_distinct(_pose(3.0), [_pose(0.0)], own, s, 0.5)
+    assert is_distinct(_pose(0.0), [], own, s)
