@@ -17,7 +17,8 @@ STRUCTURE = ROOT / "configs/parts/set1/peg_in_hole.yaml"
 
 def _run(tmp_path: Path) -> dict:
     cfg = tmp_path / "run.yaml"
-    cfg.write_text(yaml.safe_dump({"name": "t", "seed": 3, "structure": str(STRUCTURE)}))
+    # six demonstration frames, not thirty: the run only has to get to the stage that fails
+    cfg.write_text(yaml.safe_dump({"name": "t", "seed": 3, "structure": str(STRUCTURE), "demo": {"frames": 6}}))
     out = tmp_path / "out"
     assert main(["run", str(cfg), "--out", str(out)]) == 1
     report = json.loads((out / "report.json").read_text())
@@ -59,3 +60,23 @@ def test_a_part_without_grasps_is_recorded_as_no_grasp(tmp_path: Path, monkeypat
     report = _run(tmp_path)
     assert report["failed_stage"] == "grasps" and report["failure_cause"] == "no_grasp"
     assert [s["stage"] for s in report["stages"]][-1] == "grasps"
+
+
+def test_a_failed_assembly_plan_records_the_planners_cause(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from asmteach.core.interfaces import AssemblyResult
+    from asmteach.core.models import Plan
+    from asmteach.core.pipeline.stage import Run
+
+    real = Run.plugin
+
+    class CutGraph:
+        def plan(self, problem, robot, motion, progress=None) -> AssemblyResult:
+            # the reason's words would read as a motion failure: only the result's cause may decide
+            return AssemblyResult(False, Plan(), reason="motion path IK", cause=FailureCause.REGRASP_GRAPH)
+
+        def write_figures(self, result, out_dir) -> dict:
+            return {}
+
+    monkeypatch.setattr(Run, "plugin", lambda run, key: CutGraph() if key == "assembly_planner" else real(run, key))
+    report = _run(tmp_path)
+    assert report["failed_stage"] == "plan" and report["failure_cause"] == "regrasp_graph"
