@@ -35,7 +35,7 @@ Pipeline (paper, "Rough detection using point cloud"), all in the world frame
    and when a distinct one (beyond the part's symmetries, ``distinct_mm`` /
    ``distinct_deg``) scores within ``ambiguity_margin`` and the ray evidence
    does not rule it out, the view cannot tell them apart: ``found: false``
-   with the reason ("ambiguous: ...").
+   with the reason ("ambiguous: ...") and the poses in ``details["ambiguous"]``.
 
 Nothing verified means ``found: false`` with the reason of the closest miss;
 a wrong pose is never reported as found.
@@ -180,6 +180,8 @@ class CvfhIcpDetector(Detector):
                 outcome.best, outcome.details = got.best, got.details
             if got.closest is not None and (outcome.closest is None or got.closest.score > outcome.closest.score):
                 outcome.closest = got.closest
+                if got.best is None:  # the closest rejected pose's evidence goes with it (an ambiguity)
+                    outcome.details = got.details
             if outcome.best is not None:
                 break  # the largest plausible cluster that verifies is the part
         timing = clock.done()
@@ -191,6 +193,7 @@ class CvfhIcpDetector(Detector):
                 reason=f"{part.name!r} not found: best hypothesis rejected ({why})",
                 timing_ms=timing,
                 details={
+                    **({"ambiguous": outcome.details["ambiguous"]} if "ambiguous" in outcome.details else {}),
                     "clusters": len(clusters),
                     "clusters_tried": tried,
                     "icp_passes": icp_passes,
@@ -287,6 +290,9 @@ class CvfhIcpDetector(Detector):
                     f"{rival.score:.3f} vs {best.score:.3f}); the part is nearly symmetric and this view misses "
                     f"the difference"
                 )
+                info["ambiguous"] = [  # the poses the view cannot tell apart, so that callers need not read `why`
+                    {"T_world_part": v.T_world_part.tolist(), "score": round(v.score, 4)} for v in (best, rival)
+                ]
                 return _Outcome(None, replace(best, accepted=False, why=why), info, job.icp_passes)
         info = {**info, "hypotheses": len(hyps), "cluster_points": len(cluster)}
         return _Outcome(best, closest, info, job.icp_passes)

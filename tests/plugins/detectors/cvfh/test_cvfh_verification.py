@@ -116,3 +116,6 @@ def test_a_keyed_peg_is_found_right_or_not_found_never_wrong(
         assert mm <= 5.0 and deg <= 5.0, (mm, deg)
     else:
         assert "ambiguous" in d.reason and "deg away" in d.reason, d.reason
+        # the poses it cannot tell apart, for callers that must not read the reason (the pipeline's failure cause)
+        assert len(d.details["ambiguous"]) == 2 and all(np.shape(a["T_world_part"]) == (4, 4)
+                                                        for a in d.details["ambiguous"])
