@@ -146,6 +146,14 @@ def toy_dist(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 
 
 @pytest.fixture
+def toy_square_experiment(tmp_path: Path, toy_dist: Path) -> Path:
+    """An experiment file of the toy ``toy_square`` kind: x in {1, 2, 3} x 2 seeds, trials fail above 2.5."""
+    path = tmp_path / "square.yaml"
+    path.write_text("experiment: toy_square\nparams: {fail_above: 2.5}\ngrid:\n  x: [1.0, 2.0, 3.0]\nseeds: 2\n")
+    return path
+
+
+@pytest.fixture
 def toy_config(tmp_path: Path, toy_dist: Path) -> Path:
     """A valid run config naming only the toy plugins; returns its path."""
     repo = Path(__file__).resolve().parents[2]

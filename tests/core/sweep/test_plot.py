@@ -1,6 +1,5 @@
 """The generic sweep figure: which metrics, against which key, with which statistics."""
 
-import textwrap
 
 import numpy as np
 import pytest
@@ -81,20 +80,8 @@ def test_nothing_to_draw_gives_no_figure():
 
 
 @pytest.fixture
-def square_file(tmp_path, toy_dist):
-    path = tmp_path / "square.yaml"
-    path.write_text(
-        textwrap.dedent(
-            """
-            experiment: toy_square
-            params: {fail_above: 2.5}
-            grid:
-              x: [1.0, 2.0, 3.0]
-            seeds: 2
-            """
-        )
-    )
-    return path
+def square_file(toy_square_experiment):
+    return toy_square_experiment
 
 
 def test_sweep_writes_summary_png_when_the_kind_draws_none(square_file, tmp_path):

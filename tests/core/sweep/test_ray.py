@@ -1,7 +1,6 @@
 """``--executor ray`` on a private local Ray instance gives the same rows as the process pool."""
 
 import json
-import textwrap
 
 import pytest
 
@@ -9,22 +8,11 @@ from asmteach.core.sweep import run_sweep
 
 
 @pytest.mark.slow
-def test_ray_executor_matches_process_pool(tmp_path, toy_dist, monkeypatch):
+def test_ray_executor_matches_process_pool(tmp_path, toy_square_experiment, monkeypatch):
     import ray  # in the dev extras, so a missing Ray fails here rather than skipping
 
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
-    path = tmp_path / "square.yaml"
-    path.write_text(
-        textwrap.dedent(
-            """
-            experiment: toy_square
-            params: {fail_above: 2.5}
-            grid:
-              x: [1.0, 2.0, 3.0]
-            seeds: 2
-            """
-        )
-    )
+    path = toy_square_experiment
     pool_rows = run_sweep(path, tmp_path / "pool", workers=2, progress=False)
     ray_rows = run_sweep(path, tmp_path / "ray", workers=1, executor="ray", progress=False)
     assert not ray.is_initialized()  # the instance the sweep started is shut down

@@ -1,7 +1,6 @@
 """Sweeps: grid x seeds, one JSON line per trial, resume without loss, failures recorded."""
 
 import json
-import textwrap
 
 import pytest
 
@@ -12,20 +11,8 @@ from asmteach.core.sweep import group_table, run_sweep
 
 
 @pytest.fixture
-def experiment(tmp_path, toy_dist):
-    path = tmp_path / "square.yaml"
-    path.write_text(
-        textwrap.dedent(
-            """
-            experiment: toy_square
-            params: {fail_above: 2.5}
-            grid:
-              x: [1.0, 2.0, 3.0]
-            seeds: 2
-            """
-        )
-    )
-    return path
+def experiment(toy_square_experiment):
+    return toy_square_experiment
 
 
 def test_sweep_runs_grid_times_seeds_and_records_failures(experiment, tmp_path):
