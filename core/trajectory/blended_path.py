@@ -53,7 +53,9 @@ class BlendedPath(toppra.interpolator.AbstractGeometricPath):
         arc_at: dict[int, tuple[float, float]] = {}
         for i in range(1, len(pts) - 1):
             turn = float(np.arccos(np.clip(units[i - 1] @ units[i], -1.0, 1.0)))
-            if turn < MIN_TURN or deviation[i] <= 0.0:
+            # Two equal unit vectors can still give a dot product just below 1 and so a turn of ~2e-8 rad:
+            # no corner there (its bisector is zero and the arc's centre would be NaN).
+            if turn < MIN_TURN or deviation[i] <= 0.0 or not np.any(units[i] != units[i - 1]):
                 continue
             half = 0.5 * turn
             # the arc's distance from the corner is ell * (1 - cos(half)) / sin(half) = ell * tan(half / 2)

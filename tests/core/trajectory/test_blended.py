@@ -156,6 +156,19 @@ def test_blended_path_geometry() -> None:
     np.testing.assert_allclose(fd, 0.5 * (path(s[:-1], 1) + path(s[1:], 1)), atol=3e-3)
 
 
+def test_a_straight_waypoint_is_no_corner() -> None:
+    # Along this direction the two unit vectors are equal, yet their dot product rounds to just below 1
+    # (a "turn" of ~2e-8 rad): the path must stay a straight line, not an arc about a NaN centre.
+    d = np.random.default_rng(0).normal(size=(226, 6))[225]
+    pts = np.array([np.zeros(6), 0.1 * d, 0.3 * d])
+    u = np.diff(pts, axis=0) / np.linalg.norm(np.diff(pts, axis=0), axis=1)[:, None]
+    assert np.array_equal(u[0], u[1]) and np.arccos(np.clip(u[0] @ u[1], -1.0, 1.0)) > 1e-9  # the case
+    path = BlendedPath(pts, np.array([0.0, 0.005, 0.0]))
+    assert path.arcs == []
+    s = np.linspace(*path.path_interval, 101)
+    assert np.all(np.isfinite(path(s))) and np.allclose(path(s[[0, -1]]), pts[[0, 2]])
+
+
 def test_deterministic_and_bad_input() -> None:
     a, b = time_optimal(PATH, V, A), time_optimal(PATH, V, A)
     np.testing.assert_array_equal(a.times, b.times)
