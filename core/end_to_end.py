@@ -64,9 +64,10 @@ def run_config_trial(run_config: Path, overrides: dict[str, Any], seed: int,
 
 
 def report_row(report: RunReport) -> dict[str, Any]:
-    """A run report as one flat sweep row: outcome, errors (mm, deg), computer seconds per stage, robot seconds."""
+    """A run report as one flat sweep row: outcome (with the failure's cause,
+    :class:`~asmteach.core.failures.FailureCause`), errors (mm, deg), computer seconds per stage, robot seconds."""
     row: dict[str, Any] = {"success": bool(report.success), "failed_stage": report.failed_stage or "",
-                           "reason": report.reason or ""}
+                           "failure_cause": str(report.failure_cause or ""), "reason": report.reason or ""}
     for key in ("achieved_vs_taught_mm", "achieved_vs_taught_deg", "a_goal_error_mm", "plan_recheck_collisions"):
         if key in report.metrics:
             row[key] = report.metrics[key]
