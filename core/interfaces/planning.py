@@ -20,6 +20,7 @@ from asmteach.core.interfaces.part_model import PartModel
 from asmteach.core.interfaces.plugin import Plugin
 from asmteach.core.interfaces.robot import Robot
 from asmteach.core.models import AssemblyTask, Grasp, HandSpec, Plan, TablePlane
+from asmteach.core.robot import PlanningScene
 
 __all__ = ["AssemblyPlanner", "AssemblyProblem", "AssemblyResult", "GraspPlanner", "MotionPlanner", "MotionResult"]
 
@@ -118,6 +119,9 @@ class AssemblyResult:
     """Why it failed (None on success, or a planner that does not say; the run then records ``other``):
     ``no_grasp`` (no feasible grasp at the start or goal), ``regrasp_graph`` (no connected keyframe path, or the
     search's budget spent), ``motion`` (keyframes found, a motion between them not planned)."""
+    scene: PlanningScene | None = None
+    """The planning scene the plan ends in (arms, held parts, obstacles after its last segment), for a caller
+    that plans on from there; None when the planner does not say."""
 
 
 class AssemblyPlanner(Plugin):
@@ -130,9 +134,15 @@ class AssemblyPlanner(Plugin):
         robot: Robot,
         motion_planner: MotionPlanner,
         *,
+        scene: PlanningScene | None = None,
         progress: Callable[[str], None] | None = None,
     ) -> AssemblyResult:
-        """Plan with ``robot``'s kinematics and collision model; never moves its simulator."""
+        """Plan with ``robot``'s kinematics, starting in ``scene`` (default ``robot.scene``).
+
+        The planner checks collisions in scene values it derives from that one and
+        returns the scene the plan ends in (:attr:`AssemblyResult.scene`); it
+        changes neither ``robot.scene`` nor the robot's simulator.
+        """
 
     def plan_insertion(
         self,
@@ -141,14 +151,16 @@ class AssemblyPlanner(Plugin):
         motion_planner: MotionPlanner,
         *,
         T_world_a: np.ndarray,
+        scene: PlanningScene | None = None,
         progress: Callable[[str], None] | None = None,
     ) -> AssemblyResult:
         """Optional: B's part of the plan only, into A already standing at ``T_world_a`` (world, metres).
 
         The run calls it when A, seen again at its goal, is not quite where the
-        plan put it, to aim B at the A that is there. The arms start where they
-        are now. Planners that cannot do this raise :class:`NotImplementedError`
-        and the run goes on with the plan it has.
+        plan put it, to aim B at the A that is there. The arms start where
+        ``scene`` (default ``robot.scene``) has them: where they are now. Planners
+        that cannot do this raise :class:`NotImplementedError` and the run goes
+        on with the plan it has.
         """
         raise NotImplementedError
 

@@ -59,12 +59,13 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         robot: Robot,
         motion_planner: MotionPlanner,
         *,
+        scene: PlanningScene | None = None,
         progress: Callable[[str], None] | None = None,
     ) -> AssemblyResult:
         s = self.settings
         t0 = time.perf_counter()
         a, b, h = problem.part_a, problem.part_b, problem.table.height
-        scene = robot.scene
+        scene = robot.scene if scene is None else scene
         table = table_obstacle(scene, h)
         goal, goal_grasps = self._choose_goal(problem, robot, scene, table, progress)
         q_home = {arm: robot.home(arm) for arm in robot.arms}
@@ -111,7 +112,7 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
             result.plan = self._timed(robot, [("A", a.name, res_a)], t0)
             return self._fail(result, res_b, f"part B ({b.name})", t0, robot, keep_plan=True)
         result.plan = self._timed(robot, [("A", a.name, res_a), ("B", b.name, res_b)], t0)
-        result.success = True
+        result.success, result.scene = True, res_b.scene
         return result
 
     def _choose_goal(
@@ -171,10 +172,11 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         motion_planner: MotionPlanner,
         *,
         T_world_a: np.ndarray,
+        scene: PlanningScene | None = None,
         progress: Callable[[str], None] | None = None,
     ) -> AssemblyResult:
-        """B's segments only, into A standing at ``T_world_a`` (seen there); the arms start where the robot's
-        scene has them (where the world's arms are after a run's executed segments)."""
+        """B's segments only, into A standing at ``T_world_a`` (seen there); the arms start where ``scene``
+        (default the robot's: where the world's arms are after a run's executed segments) has them."""
         s = self.settings
         t0 = time.perf_counter()
         goal = assembly_goal_at(
@@ -193,14 +195,14 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
             T_world_b_goal=goal.T_world_b,
             details={"v_world": goal.v_world.tolist()},
         )
-        scene = robot.scene
+        scene = robot.scene if scene is None else scene
         q_now = {arm: np.array(scene.configuration[arm], dtype=float) for arm in robot.arms}
         res_b = self._plan_b(problem, goal, robot, scene, motion_planner, q_now, progress)
         result.details["b"] = res_b
         if not res_b.success:
             return self._fail(result, res_b, f"part B ({problem.part_b.name})", t0, robot)
         result.plan = self._timed(robot, [("B", problem.part_b.name, res_b)], t0)
-        result.success = True
+        result.success, result.scene = True, res_b.scene
         return result
 
     def _plan_b(

@@ -217,6 +217,11 @@ def test_plan_insertion_aims_b_at_an_a_seen_off_its_goal(peg_in_hole_plan) -> No
     assert {seg.part for seg in res.plan.segments} == {p.b.name}
     first = next(s for s in res.plan.segments if s.trajectory is not None).trajectory
     np.testing.assert_allclose(first.positions[0], q_now[first.arm], atol=1e-6)
+    # the plan returns the scene it ends in: every arm where its last segment left it
+    last = {seg.trajectory.arm: seg.trajectory for seg in res.plan.segments if seg.trajectory is not None}
+    assert res.scene is not None and res.scene is not before
+    for arm, traj in last.items():
+        np.testing.assert_allclose(res.scene.configuration[arm], np.asarray(traj.positions)[-1], atol=1e-6)
     np.testing.assert_allclose(res.T_world_b_goal, T_seen @ task.T_A_B, atol=1e-12)
     # B ends at the assembled pose in the A seen: follow B through each pick and place (a regrasp, when the
     # grasp set makes one the planner's choice) to the grasp it is inserted with
