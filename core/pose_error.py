@@ -36,11 +36,6 @@ class PoseError:
     dxyz_mm: tuple[float, float, float]
     drpy_deg: tuple[float, float, float]
 
-    @property
-    def cost(self) -> float:
-        """``position_mm + angle_deg``: the order in which equivalent references are compared."""
-        return self.position_mm + self.angle_deg
-
     def as_dict(self) -> dict[str, float | list[float]]:
         """JSON form, with the vocabulary's names."""
         return {
@@ -69,10 +64,11 @@ def _equivalents(T_ref: np.ndarray, left: Sequence[np.ndarray], right: Sequence[
     return np.einsum("aij,jk,bkl->abil", L, T_ref, R).reshape(-1, 4, 4)
 
 
-def _angles_deg(R_est: np.ndarray, Rs: np.ndarray) -> np.ndarray:
-    """Geodesic angles (deg) between ``R_est`` and each of ``Rs`` ``(m, 3, 3)``."""
-    cos = (np.einsum("ij,sij->s", R_est, Rs) - 1.0) / 2.0
-    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+def _nearest(T: np.ndarray, candidates: np.ndarray) -> int:
+    """Index of the candidate ``(m, 4, 4)`` nearest ``T`` by millimetres + degrees (geodesic)."""
+    pos = 1000.0 * np.linalg.norm(candidates[:, :3, 3] - T[:3, 3], axis=1)
+    cos = (np.einsum("ij,sij->s", T[:3, :3], candidates[:, :3, :3]) - 1.0) / 2.0
+    return int(np.argmin(pos + np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))))
 
 
 def pose_error(
@@ -91,17 +87,15 @@ def pose_error(
     """
     T_est = np.asarray(T_est, dtype=float)
     eq = _equivalents(np.asarray(T_ref, dtype=float), left, right)
-    d = 1000.0 * (T_est[:3, 3] - eq[:, :3, 3])
-    pos = np.linalg.norm(d, axis=1)
-    ang = _angles_deg(T_est[:3, :3], eq[:, :3, :3])
-    i = int(np.argmin(pos + ang))
+    ref = eq[_nearest(T_est, eq)]
+    d = 1000.0 * (T_est[:3, 3] - ref[:3, 3])
     # The angle from the trace loses precision near 0; the rotation vector does not.
-    angle = float(np.degrees(geometry.rotation_distance(T_est, eq[i])))
-    drpy = np.degrees(geometry.rpy(T_est[:3, :3] @ eq[i, :3, :3].T))
+    angle = float(np.degrees(geometry.rotation_distance(T_est, ref)))
+    drpy = np.degrees(geometry.rpy(T_est[:3, :3] @ ref[:3, :3].T))
     return PoseError(
-        position_mm=float(pos[i]),
+        position_mm=float(np.linalg.norm(d)),
         angle_deg=angle,
-        dxyz_mm=(float(d[i, 0]), float(d[i, 1]), float(d[i, 2])),
+        dxyz_mm=(float(d[0]), float(d[1]), float(d[2])),
         drpy_deg=(float(drpy[0]), float(drpy[1]), float(drpy[2])),
     )
 
@@ -112,6 +106,4 @@ def nearest_symmetric(T: np.ndarray, T_ref: np.ndarray, symmetries: Sequence[np.
     if not len(symmetries):
         return T
     candidates = np.einsum("ij,sjk->sik", T, np.asarray(symmetries, dtype=float).reshape(-1, 4, 4))
-    pos = 1000.0 * np.linalg.norm(candidates[:, :3, 3] - np.asarray(T_ref, float)[:3, 3], axis=1)
-    ang = _angles_deg(np.asarray(T_ref, float)[:3, :3], candidates[:, :3, :3])
-    return candidates[int(np.argmin(pos + ang))]
+    return candidates[_nearest(np.asarray(T_ref, dtype=float), candidates)]
