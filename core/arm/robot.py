@@ -25,6 +25,7 @@ import trimesh
 
 from asmteach.core.arm.batch_ik import ik_many
 from asmteach.core.arm.collision import CollisionChecker
+from asmteach.core.arm.insertion import PartContact
 from asmteach.core.arm.kinematics import Kinematics
 from asmteach.core.arm.plan_check import CheckedArm, PlanCheck
 from asmteach.core.arm.plan_checker import recheck_plan
@@ -309,6 +310,23 @@ class ArmRobot(Robot, World):
 
     def part_pose(self, name: str) -> np.ndarray:
         return self.sim.part_pose(name)
+
+    def part_contact(self, part: str, other: str) -> PartContact:
+        """The contact between two parts now: total normal force (N), its force-weighted point on ``part``
+        and ``part``'s centre of mass (world, metres); what :func:`~asmteach.core.arm.insertion.guarded_insert`
+        reads (:class:`~asmteach.core.arm.insertion.ContactSensing`)."""
+        sim = self.sim
+        for name in (part, other):
+            if name not in sim.parts:
+                raise UserError(f"no part named {name!r} in the simulated world (have {sorted(sim.parts)})")
+        body, other_body = sim.parts[part][0], sim.parts[other][0]
+        com = np.asarray(sim.p.getBasePositionAndOrientation(body)[0], dtype=float)
+        points = sim.p.getContactPoints(body, other_body)
+        force = float(sum(c[9] for c in points))
+        if force <= 1e-9:
+            return PartContact(force, None, com)
+        where = sum(c[9] * np.asarray(c[5], dtype=float) for c in points) / force
+        return PartContact(force, where, com)
 
     def camera_pose(self) -> np.ndarray:
         """``T_world_cam`` (OpenCV frame) of the simulated depth and RGB cameras."""

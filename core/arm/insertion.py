@@ -1,0 +1,302 @@
+"""Guarded insertion: a held part goes along its insertion line in small steps, watching for resistance.
+
+A planned insertion is a straight TCP line. Run blind, a part that meets the rim of its hole (a lateral
+error larger than the clearance) is shoved on by the arm's position servos: it is pushed in the hand,
+tilted, the other part is dragged along, and the assembly ends far off (the structures sweep's jams). A
+real cell inserts force-guided instead; :func:`guarded_insert` does the same on any
+:class:`~asmteach.core.robot.World`:
+
+- the TCP advances ``step_m`` at a time along the planned line (any direction: down, sideways, up);
+- after each step it reads the resistance: the part's slip in the hand since the insertion started (the
+  hand's compliance acting as a force sensor; :meth:`~asmteach.core.robot.World.part_pose` is enough) and,
+  on a world that senses contacts (:class:`ContactSensing`), the contact force between the two parts and
+  where it acts;
+- on resistance short of the planned depth it backs off and shifts the line sideways (perpendicular to
+  the insertion): away from where the contact pushed, else along a spiral of growing radius, as a cell's
+  search insertion does; it never pushes past ``force_limit_n`` or ``slip_limit_m``;
+- it watches the other part: how far it moved while the part came in, and when.
+
+Units: metres, newtons, seconds (the robot's clock: the executed trajectories' own seconds). Frames: world.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from asmteach.core import geometry
+from asmteach.core.models import Trajectory
+
+__all__ = [
+    "ContactSensing",
+    "InsertionContact",
+    "InsertionOutcome",
+    "InsertionSettings",
+    "PartContact",
+    "guarded_insert",
+]
+
+
+@dataclass(frozen=True)
+class PartContact:
+    """The contact between two parts: total normal force (N) and its force-weighted point (world, metres),
+    with the first part's centre of mass (world, metres) to say on which side of it the contact acts."""
+
+    force_n: float
+    point_world: np.ndarray | None
+    com_world: np.ndarray
+
+
+@runtime_checkable
+class ContactSensing(Protocol):
+    """A world that reports the contact between two of its parts (a simulator; a cell with a wrist F/T sensor
+    and a model of the parts could estimate it)."""
+
+    def part_contact(self, part: str, other: str) -> PartContact: ...
+
+
+@dataclass(frozen=True)
+class InsertionSettings:
+    """How the guarded insertion moves and what it calls resistance.
+
+    ``step_m``: TCP travel between two readings; ``speed_m_s``: TCP speed along the line; ``slip_limit_m``
+    and ``force_limit_n``: resistance (slip of the part in the hand since the start, contact force between the
+    parts); ``seated_m``: resistance this close to the planned end is the part seated; ``backoff_m``: how far
+    it backs out before a sideways correction; ``search_step_m`` and ``search_radius_m``: size of one sideways
+    correction and the farthest it shifts the line; ``max_tries``: corrections before it gives up (a jam).
+    """
+
+    step_m: float = 0.0005
+    speed_m_s: float = 0.02
+    slip_limit_m: float = 0.0004
+    force_limit_n: float = 20.0
+    seated_m: float = 0.0015
+    backoff_m: float = 0.0015
+    search_step_m: float = 0.0004
+    search_radius_m: float = 0.0025
+    max_tries: int = 16
+    other_moved_m: float = 0.0005
+
+
+@dataclass
+class InsertionContact:
+    """One time the insertion met resistance: at ``depth_m`` of the planned length (how far the part itself
+    went), with ``force_n`` (contact force, NaN if the world senses none) and ``slip_m`` (the part pushed in
+    the hand), ``t_s`` seconds into the insertion, while the line was shifted by ``offset_m`` sideways."""
+
+    depth_m: float
+    force_n: float
+    slip_m: float
+    t_s: float
+    offset_m: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {
+            "depth_mm": round(1000.0 * self.depth_m, 2),
+            "force_n": round(self.force_n, 1) if np.isfinite(self.force_n) else None,  # type: ignore[dict-item]
+            "slip_mm": round(1000.0 * self.slip_m, 2),
+            "t_s": round(self.t_s, 3),
+            "offset_mm": round(1000.0 * self.offset_m, 2),
+        }
+
+
+@dataclass
+class InsertionOutcome:
+    """What a guarded insertion did: ``inserted`` (reached the planned depth, or seated within ``seated_m``),
+    the part's ``depth_m`` of ``length_m``, the sideways ``correction_m`` (world vector) it went in with, every
+    resistance met (``contacts``), the robot ``seconds`` it took, and the other part's largest displacement
+    ``other_moved_m`` with the time it first moved more than :attr:`InsertionSettings.other_moved_m`."""
+
+    inserted: bool
+    depth_m: float
+    length_m: float
+    correction_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    contacts: list[InsertionContact] = field(default_factory=list)
+    seconds: float = 0.0
+    other_moved_m: float = 0.0
+    other_moved_t_s: float | None = None
+    reason: str = ""
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready, in millimetres (the execution trace's unit)."""
+        worst = max((c.force_n for c in self.contacts if np.isfinite(c.force_n)), default=None)
+        return {
+            "inserted": self.inserted,
+            "depth_mm": round(1000.0 * self.depth_m, 2),
+            "length_mm": round(1000.0 * self.length_m, 2),
+            "correction_mm": np.round(1000.0 * self.correction_m, 2).tolist(),
+            "tries": len(self.contacts),
+            "max_force_n": None if worst is None else round(worst, 1),
+            "contacts": [c.as_dict() for c in self.contacts[:8]],
+            "seconds": round(self.seconds, 3),
+            "other_moved_mm": round(1000.0 * self.other_moved_m, 2),
+            "other_moved_t_s": None if self.other_moved_t_s is None else round(self.other_moved_t_s, 3),
+            "reason": self.reason,
+        }
+
+
+class _Guard:
+    """Moves the TCP along (possibly shifted) insertion lines and reads the resistance after every step."""
+
+    def __init__(self, robot: Any, traj: Trajectory, part: str, other: str | None, s: InsertionSettings) -> None:
+        self.robot, self.arm, self.part, self.other, self.s = robot, traj.arm, part, other, s
+        pos = np.asarray(traj.positions, dtype=float)
+        self.T_start = robot.fk(self.arm, pos[0])
+        self.T_end = robot.fk(self.arm, pos[-1])
+        delta = self.T_end[:3, 3] - self.T_start[:3, 3]
+        self.length = float(np.linalg.norm(delta))
+        self.d = delta / self.length if self.length > 1e-9 else np.array([0.0, 0.0, -1.0])
+        self.u, self.w = _perpendicular(self.d)
+        T_tcp = robot.fk(self.arm, robot.current(self.arm))
+        self.T_tcp_part = geometry.invert(T_tcp) @ robot.part_pose(part)  # the part in the hand now
+        self.T_other0 = robot.part_pose(other) if other else None
+        self.seconds = 0.0
+        self.other_moved, self.other_moved_t = 0.0, None
+        self.names = robot.joint_names(self.arm)
+        self.v_max = np.asarray(robot.speed_limits(self.arm), dtype=float)
+
+    def pose_at(self, s: float, offset: np.ndarray) -> np.ndarray:
+        """The TCP pose ``s`` metres along the line shifted sideways by ``offset`` (planned end's orientation)."""
+        T = self.T_end.copy()
+        T[:3, 3] = self.T_start[:3, 3] + s * self.d + offset
+        return T
+
+    def move_to(self, T: np.ndarray) -> bool:
+        """One short step of the TCP to ``T`` (False when IK fails there)."""
+        q0 = self.robot.current(self.arm)
+        ik = self.robot.ik(self.arm, T, q0)
+        if not ik.success or ik.q is None:
+            return False
+        dist = float(np.linalg.norm(self.robot.fk(self.arm, q0)[:3, 3] - T[:3, 3]))
+        dt = max(dist / self.s.speed_m_s, 1.2 * float(np.max(np.abs(ik.q - q0) / self.v_max)), 0.01)
+        self.robot.execute(
+            Trajectory(arm=self.arm, joint_names=self.names, times=[0.0, dt], positions=np.vstack([q0, ik.q]))
+        )
+        self.seconds += dt
+        self._watch_other()
+        return True
+
+    def _watch_other(self) -> None:
+        if self.T_other0 is None or self.other is None:
+            return
+        moved = geometry.translation_distance(self.robot.part_pose(self.other), self.T_other0)
+        if moved > self.other_moved:
+            self.other_moved = moved
+        if self.other_moved_t is None and moved > self.s.other_moved_m:
+            self.other_moved_t = self.seconds
+
+    def reading(self, s: float, offset: np.ndarray) -> tuple[float, float, float, np.ndarray | None]:
+        """``(slip_m, force_n, depth_m, lateral push direction or None)`` after a step to ``s``."""
+        T_tcp = self.robot.fk(self.arm, self.robot.current(self.arm))
+        T_part = self.robot.part_pose(self.part)
+        expected = T_tcp @ self.T_tcp_part
+        slip = geometry.translation_distance(T_part, expected)
+        axial_lag = float(np.dot(expected[:3, 3] - T_part[:3, 3], self.d))
+        depth = s - max(axial_lag, 0.0)
+        force, away = float("nan"), None
+        if self.other is not None and isinstance(self.robot, ContactSensing):
+            c = self.robot.part_contact(self.part, self.other)
+            force = c.force_n
+            if c.point_world is not None:
+                lateral = c.point_world - c.com_world
+                lateral -= np.dot(lateral, self.d) * self.d
+                n = float(np.linalg.norm(lateral))
+                away = -lateral / n if n > 1e-5 else None
+        if away is None and slip > 0.5 * self.s.slip_limit_m:
+            # no contact sensing: the part is pushed sideways away from what it presses on
+            lateral = (T_part[:3, 3] - expected[:3, 3]) - np.dot(T_part[:3, 3] - expected[:3, 3], self.d) * self.d
+            n = float(np.linalg.norm(lateral))
+            away = lateral / n if n > 1e-5 else None
+        return slip, force, depth, away
+
+    def resisted(self, slip: float, force: float) -> bool:
+        return slip > self.s.slip_limit_m or (np.isfinite(force) and force > self.s.force_limit_n)
+
+
+def _perpendicular(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors perpendicular to ``d`` and to each other."""
+    a = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(d, a)
+    u /= np.linalg.norm(u)
+    return u, np.cross(d, u)
+
+
+def _spiral(k: int, pitch: float, u: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """The ``k``-th point (k >= 1) of an Archimedean spiral with ``pitch`` metres between points and turns."""
+    theta = np.sqrt(4.0 * np.pi * k)  # equal arc length between points
+    r = pitch * theta / (2.0 * np.pi)
+    return r * (np.cos(theta) * u + np.sin(theta) * w)
+
+
+def guarded_insert(
+    robot: Any,
+    traj: Trajectory,
+    part: str,
+    other: str | None = None,
+    settings: InsertionSettings | None = None,
+) -> InsertionOutcome:
+    """Run the insertion ``traj`` (a straight TCP line holding ``part``) force-guided; see the module doc.
+
+    ``robot`` is a :class:`~asmteach.core.robot.World` and :class:`~asmteach.core.interfaces.RobotModel`
+    (``fk``, ``ik``, ``execute``, ``part_pose``, ``current``); ``other`` is the part inserted into (watched,
+    and its contacts read when the world is :class:`ContactSensing`). The arm starts at the trajectory's start.
+    Returns the :class:`InsertionOutcome`; it never raises on a jam (the part stays where it stopped, eased
+    back to the depth where the force stayed under the limit).
+    """
+    s = settings or InsertionSettings()
+    g = _Guard(robot, traj, part, other, s)
+    out = InsertionOutcome(inserted=False, depth_m=0.0, length_m=g.length)
+    if g.length < 1e-6:
+        robot.execute(traj)
+        out.inserted = True
+        return out
+    offset = np.zeros(3)
+    pos, best_depth, tries, spiral_k = 0.0, 0.0, 0, 0
+    steps = max(1, int(np.ceil(g.length / s.step_m)))
+    while True:
+        target = min(g.length, pos + g.length / steps)
+        if not g.move_to(g.pose_at(target, offset)):
+            out.reason = "no IK on the insertion line"
+            break
+        pos = target
+        slip, force, depth, away = g.reading(pos, offset)
+        best_depth = max(best_depth, depth)
+        resisted = g.resisted(slip, force)
+        if not resisted and pos >= g.length - 1e-9:
+            out.inserted = True
+            break
+        if not resisted:
+            continue
+        if depth >= g.length - s.seated_m:
+            out.inserted = True  # it met the seat (a blind hole's bottom, a stop) where the plan ends
+            break
+        out.contacts.append(InsertionContact(depth, force, slip, g.seconds, float(np.linalg.norm(offset))))
+        tries += 1
+        if tries > s.max_tries:
+            out.reason = f"still resisted after {s.max_tries} sideways corrections"
+            break
+        # back off (the hand's spring lets go of the part), then shift the line sideways
+        pos = max(0.0, pos - s.backoff_m - slip)
+        g.move_to(g.pose_at(pos, offset))
+        if away is not None:
+            new = offset + s.search_step_m * away
+        else:
+            spiral_k += 1
+            new = _spiral(spiral_k, s.search_step_m, g.u, g.w)
+        if np.linalg.norm(new) > s.search_radius_m:
+            spiral_k += 1
+            new = _spiral(spiral_k, s.search_step_m, g.u, g.w)
+            if np.linalg.norm(new) > s.search_radius_m:
+                out.reason = f"no way in within {1000.0 * s.search_radius_m:.1f} mm sideways"
+                break
+        offset = new
+        if not g.move_to(g.pose_at(pos, offset)):
+            out.reason = "no IK for the sideways correction"
+            break
+    out.depth_m = best_depth if not out.inserted else max(best_depth, g.reading(pos, offset)[2])
+    out.correction_m = offset
+    out.seconds = g.seconds
+    out.other_moved_m, out.other_moved_t_s = g.other_moved, g.other_moved_t
+    return out
