@@ -39,6 +39,13 @@ class RunReport(StrictModel):
         "topple, off_goal, other); decided by the failing stage from structured data, never parsed from the reason; "
         "None on success and in reports written before it existed",
     )
+    failure_details: dict[str, Any] = Field(
+        default_factory=dict,
+        description="the evidence the failing stage named its cause from (measure: the execution event - the "
+        "jammed insertion's depth, contact force and time, the part that toppled or was moved and by which motion "
+        "and when - and the insertion's error split into grasp, A's placement and taught pose, mm / deg); empty "
+        "on success and where the stage records none",
+    )
     stages: list[StageOutcome] = Field(default_factory=list)
     task: AssemblyTask | None = None
     detections: list[Detection] = Field(default_factory=list)

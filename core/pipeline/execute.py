@@ -11,10 +11,11 @@ from typing import Any
 
 import numpy as np
 
-from asmteach.core import geometry
+from asmteach.core.arm.insertion import guarded_insert
 from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import Robot
 from asmteach.core.models import Plan, RunReport
+from asmteach.core.pipeline.monitor import ExecutionTrace, plan_parts
 from asmteach.core.pipeline.stage import Run, StageFailed
 
 __all__ = ["execute_stage", "write_animation"]
@@ -31,16 +32,21 @@ def execute_stage(run: Run, robot: Robot, plan: Plan, stage: str = "execute") ->
             except NotImplementedError:  # World.sense_rgb is optional: no colour camera, no animation
                 record = False
                 d["animation"] = f"not recorded: {type(robot).__name__} has no colour camera"
-        trace = _ExecutionTrace(robot)
+        trace = ExecutionTrace(robot, plan_parts(plan), run.report.robot_seconds.get("total", 0.0))
         d["trace"] = trace.events
         for seg in plan.segments:
             if seg.trajectory is not None:
-                for chunk in _chunks(seg.trajectory, period if record else None):
-                    robot.execute(chunk)
-                    if record:
-                        frames.append(robot.sense_rgb())
-                trace.after_path(seg.trajectory, seg.label, seg.kind)
-                _count_robot_seconds(run.report, seg)
+                trace.before_path()
+                seconds = _insert(robot, seg, trace) if seg.kind == "insertion" else None
+                if seconds is None:
+                    for chunk in _chunks(seg.trajectory, period if record else None):
+                        robot.execute(chunk)
+                        if record:
+                            frames.append(robot.sense_rgb())
+                elif record:
+                    frames.append(robot.sense_rgb())
+                trace.after_path(seg.trajectory, seg.label, seg.kind, seconds)
+                _count_robot_seconds(run.report, seg, seconds)
             elif seg.gripper is not None:
                 ev = seg.gripper
                 close = ev.action == "close"
@@ -58,72 +64,29 @@ def execute_stage(run: Run, robot: Robot, plan: Plan, stage: str = "execute") ->
     return frames
 
 
-def _count_robot_seconds(report: RunReport, seg: Any) -> None:
-    """Add an executed motion's duration (simulated seconds) to the report's robot clock, in total and by kind."""
-    seconds = float(seg.trajectory.times[-1] - seg.trajectory.times[0])
+def _insert(robot: Robot, seg: Any, trace: ExecutionTrace) -> float | None:
+    """Run an insertion guarded (:func:`~asmteach.core.arm.insertion.guarded_insert`) when its arm holds a part;
+    the robot seconds it took, or None when the arm holds nothing (it runs as planned)."""
+    arm = seg.trajectory.arm
+    part = trace.held.get(arm)
+    if part is None:
+        return None
+    other = trace.other_part(part)
+    q = np.asarray(seg.trajectory.positions)
+    outcome = guarded_insert(robot, seg.trajectory, part, other)
+    trace.insertion(seg.label, part, other, outcome, robot.fk(arm, q[0]), robot.fk(arm, q[-1]))
+    return outcome.seconds
+
+
+def _count_robot_seconds(report: RunReport, seg: Any, seconds: float | None = None) -> None:
+    """Add an executed motion's duration (simulated seconds; default: its trajectory's) to the report's robot
+    clock, in total and by kind."""
+    if seconds is None:
+        seconds = float(seg.trajectory.times[-1] - seg.trajectory.times[0])
     clock = report.robot_seconds
     clock["total"] = round(clock.get("total", 0.0) + seconds, 3)
     kind = seg.kind or "unlabelled"
     clock[kind] = round(clock.get(kind, 0.0) + seconds, 3)
-
-
-class _ExecutionTrace:
-    """What happened to the parts during execution, against what the plan assumed.
-
-    One event per gripper action: the part's pose (mm, deg); on close, how far
-    it moved since its release (toppled, pushed); on release, how far it
-    slipped in the hand while held, the label and kind (``after_kind``:
-    transit, approach, insertion, regrasp or None) of the motion before, and
-    how far it dropped when let go (mm).
-    """
-
-    def __init__(self, robot: Robot) -> None:
-        self.robot = robot
-        self.events: list[dict[str, Any]] = []
-        self.held: dict[str, str] = {}  # arm -> part
-        self.T_tcp_part: dict[str, np.ndarray] = {}  # part -> its pose in the hand at the close
-        self.T_released: dict[str, np.ndarray] = {}  # part -> T_world_part after its last release
-        self.max_tracking_error = 0.0
-        self.last_path: dict[str, str] = {}  # arm -> label of its last motion
-        self.last_kind: dict[str, str | None] = {}  # arm -> kind of its last motion (PlanSegment.kind)
-
-    def _tcp(self, arm: str) -> np.ndarray:
-        return self.robot.fk(arm, self.robot.current(arm))
-
-    def after_path(self, traj: Any, label: str, kind: str | None = None) -> None:
-        err = float(np.max(np.abs(self.robot.current(traj.arm) - np.asarray(traj.positions)[-1])))
-        self.max_tracking_error = max(self.max_tracking_error, err)
-        self.last_path[traj.arm] = label
-        self.last_kind[traj.arm] = kind
-
-    def before_grip(self, label: str, arm: str, close: bool, part: str | None) -> None:
-        part = part if close else self.held.get(arm)
-        ev: dict[str, Any] = {"label": label}
-        if part is not None:
-            T = self.robot.part_pose(part)
-            ev.update(part=part, **geometry.to_xyz_mm_rpy_deg(T))
-            if close and part in self.T_released:
-                moved = geometry.translation_distance(T, self.T_released[part])
-                ev["moved_since_release_mm"] = round(1000.0 * moved, 2)
-            if not close and part in self.T_tcp_part:
-                T_expected = self._tcp(arm) @ self.T_tcp_part[part]
-                ev["slip_in_hand_mm"] = round(1000.0 * geometry.translation_distance(T, T_expected), 2)
-                ev["after"] = self.last_path.get(arm, "")
-                ev["after_kind"] = self.last_kind.get(arm)
-        self.events.append(ev)
-
-    def after_grip(self, arm: str, close: bool, part: str | None) -> None:
-        if close and part is not None:
-            self.held[arm] = part
-            self.T_tcp_part[part] = geometry.invert(self._tcp(arm)) @ self.robot.part_pose(part)
-            return
-        part = self.held.pop(arm, None)
-        if part is not None:
-            T = self.robot.part_pose(part)
-            before = self.events[-1]
-            moved = np.subtract(T[:3, 3] * 1000.0, before.get("xyz_mm", T[:3, 3] * 1000.0))
-            before["dropped_mm"] = round(float(np.linalg.norm(moved)), 2)
-            self.T_released[part] = T
 
 
 def _chunks(traj: Any, period: float | None) -> list[Any]:

@@ -5,14 +5,14 @@ from __future__ import annotations
 from typing import Any
 
 from asmteach.core import geometry
-from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import PartModel, Robot
 from asmteach.core.io import write_json
-from asmteach.core.models import AssemblyTask, RunReport
+from asmteach.core.models import AssemblyTask
+from asmteach.core.pipeline.causes import failure_story, insertion_error
 from asmteach.core.pipeline.stage import Run, StageFailed
 from asmteach.core.pose_error import pose_error
 
-__all__ = ["SLIP_NOTE_MM", "measure_stage"]
+__all__ = ["measure_stage"]
 
 
 def measure_stage(
@@ -50,52 +50,17 @@ def measure_stage(
                 "T_A_B_true": true_task.T_A_B.tolist(),
             },
         )
+        split = insertion_error(run.report, learned, true_task, result.T_world_a_goal)
+        if split is not None:
+            d["insertion_error"] = split
         run.report.success = bool(ok)
         if not ok:
-            slip = _worst_slip(run.report)
+            note, cause, evidence = failure_story(run.report, split)
+            run.report.failure_details = evidence
             raise StageFailed(
                 f"assembled outside tolerance: B in A off by {vs_taught.position_mm:.2f} mm / "
                 f"{vs_taught.angle_deg:.2f} deg (limits {ex.success_position_mm} mm / {ex.success_angle_deg} deg), "
-                f"A {a_goal_mm:.2f} mm from its goal (limit {ex.success_a_goal_mm} mm)" + _slip_note(slip),
-                cause=_outside_tolerance_cause(slip),
+                f"A {a_goal_mm:.2f} mm from its goal (limit {ex.success_a_goal_mm} mm); " + note,
+                details={"failure": evidence},
+                cause=cause,
             )
-
-
-SLIP_NOTE_MM = 1.0
-"""A part this far (mm) from where the hand should hold it at its release was pushed in the hand: the motion
-before the release met resistance (a jam on an insertion, a collision); the failure reason names it."""
-
-
-def _worst_slip(report: RunReport) -> dict[str, Any] | None:
-    """The execution trace's release event with the largest slip in the hand beyond :data:`SLIP_NOTE_MM`, else None.
-
-    Its fields (:class:`asmteach.core.pipeline.execute._ExecutionTrace`): ``part``, ``label`` (the release),
-    ``after`` / ``after_kind`` (the motion before it and its kind), ``slip_in_hand_mm``.
-    """
-    events = [
-        ev
-        for st in report.stages
-        if st.stage in ("execute_a", "execute")
-        for ev in (st.details or {}).get("trace", [])
-        if ev.get("slip_in_hand_mm", 0.0) > SLIP_NOTE_MM
-    ]
-    return max(events, key=lambda e: e["slip_in_hand_mm"]) if events else None
-
-
-def _outside_tolerance_cause(slip: dict[str, Any] | None) -> FailureCause:
-    """Jam when the worst slip in the hand (:func:`_worst_slip`) came during an insertion motion (the part met
-    resistance there), else off goal (pushed elsewhere, e.g. A at its placing, or not pushed at all).
-
-    Toppling has no structured evidence in the trace yet, so :attr:`FailureCause.TOPPLE` is not decided here.
-    """
-    return FailureCause.JAM if slip is not None and slip.get("after_kind") == "insertion" else FailureCause.OFF_GOAL
-
-
-def _slip_note(ev: dict[str, Any] | None) -> str:
-    """``"; <part> was pushed N mm in the hand by '<motion>' ..."`` for the worst slip event, else ``""``."""
-    if ev is None:
-        return ""
-    return (
-        f"; {ev.get('part', 'the part')} was pushed {ev['slip_in_hand_mm']:.1f} mm in the hand by "
-        f"{ev.get('after') or ev['label']!r} (it met resistance there: a jam, if that is the insertion)"
-    )
