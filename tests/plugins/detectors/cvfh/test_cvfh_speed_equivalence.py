@@ -1,5 +1,5 @@
 """The speed-ups of issue 27 change no result: the pruned ray tree of ``surface_check``, the batched
-distance query of the pre-score and its k-d tree bounds give exactly what the unpruned / one-pose-at-a-time /
+distance query of the pre-score and its distance-grid bounds give exactly what the unpruned / one-pose-at-a-time /
 ray-casting computations give; a verification rejected before its surface check says what it said with it; the
 near-twin screen finds the pose the full near-twin pass finds."""
 
@@ -41,8 +41,9 @@ def scene_and_model():  # type: ignore[no-untyped-def]
     return scene, model_cloud(mesh, 4000)
 
 
-def _surface_counts_unpruned(T_part_world: np.ndarray, context: np.ndarray, model: ModelCloud,
-                             s: RefineSettings) -> tuple[int, int, int, int, int]:
+def _surface_counts_unpruned(
+    T_part_world: np.ndarray, context: np.ndarray, model: ModelCloud, s: RefineSettings
+) -> tuple[int, int, int, int, int]:
     """``surface_check``'s counts with the tree over every seen point (the code before the speed-up)."""
     eye = geometry.transform_points(T_part_world, np.asarray(DEFAULT_EYE, float)[None])[0]
     d = model.points - eye
@@ -82,11 +83,20 @@ def test_the_pruned_ray_tree_counts_what_the_full_one_does(scene_and_model, turn
     R = geometry.rot_z(np.radians(turn_deg))[:3, :3]
     T = geometry.from_rotation(R, c - R @ c) @ scene.T_world_part  # right pose, slightly and badly turned
     s = RefineSettings()
-    got = surface_check(geometry.invert(T), context, DEFAULT_EYE, model, fit=s.surface_fit, off=s.surface_off,
-                        ray_radius=s.ray_radius, max_incidence_deg=s.max_incidence_deg)
+    got = surface_check(
+        geometry.invert(T),
+        context,
+        DEFAULT_EYE,
+        model,
+        fit=s.surface_fit,
+        off=s.surface_off,
+        ray_radius=s.ray_radius,
+        max_incidence_deg=s.max_incidence_deg,
+    )
     assert got.visible > 0
     assert (got.visible, got.explained, got.seen_through, got.in_front, got.missing) == _surface_counts_unpruned(
-        geometry.invert(T), context, model, s)
+        geometry.invert(T), context, model, s
+    )
 
 
 def test_batched_near_shares_equal_one_query_per_pose(scene_and_model) -> None:  # type: ignore[no-untyped-def]
@@ -103,19 +113,41 @@ def test_batched_near_shares_equal_one_query_per_pose(scene_and_model) -> None: 
     assert len(near_shares([], points, model, 0.004)) == 0
 
 
-@pytest.mark.parametrize("dist", [0.004, 0.012])
-def test_the_sample_tree_bounds_give_the_shares_of_the_exact_distances(scene_and_model, dist: float) -> None:  # type: ignore[no-untyped-def]
+@pytest.mark.parametrize("dist", [0.004, 0.012, 0.03])
+def test_the_distance_grid_bounds_give_the_shares_of_the_exact_distances(scene_and_model, dist: float) -> None:  # type: ignore[no-untyped-def]
     scene, model = scene_and_model
     points = scene.cloud[scene.frame.labels == 1][::3]
     rng = np.random.default_rng(1)
-    # Poses from right to far off: every point class (near a sample, in the band, beyond it) occurs.
+    # Poses from right to far off: every point class (settled near, in the band, settled far, off the grid) occurs;
+    # 0.03 is beyond the grid's margin, so off-grid points need the exact distance there.
     Ts = [scene.T_world_part @ geometry.from_rotvec(rng.normal(scale=s, size=3)) for s in (0.0, 0.05, 0.3, 1.0)]
-    Ts += [geometry.compose(geometry.from_rotation(np.eye(3), rng.normal(scale=0.01, size=3)), T) for T in Ts]
+    Ts += [
+        geometry.compose(geometry.from_rotation(np.eye(3), rng.normal(scale=sc, size=3)), T)
+        for T in Ts
+        for sc in (0.01, 0.04)
+    ]
     samples = SampleIndex.of(model)
-    assert 0.0 < samples.cover < 0.01
+    assert samples.step >= 0.002 and samples.distances.size <= 200_000 and samples.margin < 0.03
     exact = near_shares(Ts, points, model, dist)
-    assert 0.0 < exact.min() < exact.max() == 1.0
+    assert exact.max() == 1.0 and np.any((exact > 0.0) & (exact < 1.0))
     assert near_shares(Ts, points, model, dist, samples).tolist() == exact.tolist()
+
+
+def test_the_distance_grid_bounds_hold_the_exact_distance(scene_and_model) -> None:  # type: ignore[no-untyped-def]
+    _, model = scene_and_model
+    samples = SampleIndex.of(model)
+    rng = np.random.default_rng(2)
+    lo, hi = np.asarray(model.mesh.bounds)
+    local = rng.uniform(lo - 0.05, hi + 0.05, size=(20000, 3))  # inside, near and beyond the grid
+    node, reach = samples.bounds(local)
+    d = model.scene.compute_distance(o3d.core.Tensor(local.astype(np.float32))).numpy()
+    on = np.isfinite(node)
+    assert 0 < on.sum() < len(local)
+    assert np.all(np.abs(d[on] - node[on]) <= reach[on])
+    assert np.all(reach[on] <= samples.step * np.sqrt(3.0) / 2.0 + 1e-5)
+    assert np.all(d[~on] > samples.margin)  # off the grid: farther than its margin
+    node, reach = samples.bounds(np.array([[np.nan, 0.0, 0.0], [1e30, 0.0, 0.0]]))  # near nothing, no warning
+    assert np.isinf(node).all() and not reach.any()
 
 
 def test_a_verification_rejected_before_the_surface_check_keeps_its_verdict_and_score(scene_and_model) -> None:  # type: ignore[no-untyped-def]
