@@ -18,7 +18,7 @@ from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Corrector, Detector, PartModel
 from asmteach.core.models import Detection, TablePlane
 
-__all__ = ["SEGMENT_RADIUS", "detect_and_correct", "part_segment"]
+__all__ = ["SEGMENT_RADIUS", "detect_and_correct", "part_segment", "provisional_detection"]
 
 SEGMENT_RADIUS = 0.01
 """Metres: cloud points this close to the part's surface at the rough pose are its observed segment."""
@@ -39,6 +39,28 @@ def part_segment(
     return pts[np.isfinite(d)]
 
 
+def provisional_detection(det: Detection) -> Detection:
+    """``det`` taken as found at the first pose it lists when it is ambiguous between hull twins, else ``det``.
+
+    The returned detection keeps the rivals in ``details["ambiguous"]`` (so the pipeline looks again),
+    says ``details["provisional"] = True`` and keeps the detector's reason in
+    ``details["provisional_reason"]``.
+    """
+    rivals = det.details.get("ambiguous") or []
+    if det.found or det.details.get("ambiguous_kind") != "hull_twin" or not rivals:
+        return det
+    first = rivals[0]
+    return det.model_copy(
+        update={
+            "found": True,
+            "reason": None,
+            "rough": np.asarray(first["T_world_part"], dtype=float),
+            "fitness": first.get("fitness"),
+            "details": {**det.details, "provisional": True, "provisional_reason": det.reason},
+        }
+    )
+
+
 def _table_of(det: Detection) -> TablePlane:
     """The table the detector found (or assumed), else the default one."""
     raw = det.details.get("table")
@@ -53,8 +75,16 @@ def detect_and_correct(
     table: TablePlane | None = None,
     *,
     viewpoint: np.ndarray | None = None,
+    provisional: bool = False,
 ) -> Detection:
     """Detect ``part`` in ``cloud`` ``(n, 3)``, then correct the rough pose when a corrector is given.
+
+    ``provisional``: the caller looks at the part again once it has moved it (the pipeline's look-again
+    step), so a detection the view left ambiguous between twins of the part's convex hull
+    (``details["ambiguous_kind"] == "hull_twin"``: the same outside, so the same grasps) goes on with the
+    first of the poses it lists (the best-scoring one) as found, marked ``details["provisional"] = True``
+    and still listing them all in ``details["ambiguous"]``. The detector itself never reports such a
+    guess as found (:func:`provisional_detection`).
 
     ``viewpoint`` ((3,), world frame, metres) is the camera centre, or ``None`` for
     the detector's own setting; the corrector gets the viewpoint the detector used
@@ -66,6 +96,8 @@ def detect_and_correct(
     ``total`` both, ``cpu_correct`` the correction's process time.
     """
     det = detector.detect(cloud, part, table, viewpoint=viewpoint)
+    if provisional and not det.found:
+        det = provisional_detection(det)
     if not det.found or corrector is None or det.rough is None:
         return det
     t0, c0 = time.perf_counter(), time.process_time()

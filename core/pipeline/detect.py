@@ -63,7 +63,9 @@ def detect_stage(
         out: dict[str, Detection] = {}
         for part in parts:
             detector.prepare(part)
-            det = detect_and_correct(detector, corrector, cloud, part, table, viewpoint=viewpoint)
+            # Only A is looked at again once moved (run.py): only A may go on with one of two hull twins.
+            again = run.execution.look_again != "never" and part is parts[0]
+            det = detect_and_correct(detector, corrector, cloud, part, table, viewpoint=viewpoint, provisional=again)
             if not det.found or det.rough is None:
                 run.report.detections.append(det)
                 raise StageFailed(f"{part.name} not found: {det.reason}", cause=not_found_cause(det))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from asmteach.core import geometry
-from asmteach.core.detect_correct import detect_and_correct, part_segment
+from asmteach.core.detect_correct import detect_and_correct, part_segment, provisional_detection
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Corrector, Detector, PartModel
 from asmteach.core.models import Correction, Detection, TablePlane
@@ -87,3 +87,35 @@ def test_a_refused_correction_keeps_the_rough_pose_and_says_why(part: PartModel)
     det = detect_and_correct(_Found(T), _Snap(refuse=True), _cloud(part, T), part)
     assert det.found and det.corrected is None
     assert "no placement" in det.details["correction_error"]
+
+
+def _ambiguous(kind: str) -> Detection:
+    twins = [geometry.from_rotation(np.eye(3), (0.4, 0.0, 0.02)), geometry.from_rpy(np.pi, 0.0, 0.0, (0.4, 0.0, 0.02))]
+    return Detection(
+        part="p",
+        found=False,
+        reason="ambiguous: twins",
+        details={"ambiguous": [{"T_world_part": T.tolist(), "fitness": 0.97} for T in twins], "ambiguous_kind": kind},
+    )
+
+
+def test_only_hull_twins_go_on_provisionally_with_the_first_pose() -> None:
+    det = provisional_detection(_ambiguous("hull_twin"))
+    assert det.found and det.reason is None and det.details["provisional"]
+    assert np.allclose(det.rough, np.asarray(_ambiguous("hull_twin").details["ambiguous"][0]["T_world_part"]))
+    assert len(det.details["ambiguous"]) == 2 and det.details["provisional_reason"] == "ambiguous: twins"
+    near = _ambiguous("near_twin")
+    assert provisional_detection(near) is near  # a near twin changes the grasp: no guess
+
+
+class _Ambiguous(Detector):
+    def detect(
+        self, cloud: np.ndarray, part: PartModel, table: TablePlane | None = None, viewpoint: np.ndarray | None = None
+    ) -> Detection:
+        return _ambiguous("hull_twin")
+
+
+def test_a_hull_twin_ambiguity_is_found_only_for_a_caller_that_looks_again(part: PartModel) -> None:
+    cloud = np.zeros((10, 3))
+    assert not detect_and_correct(_Ambiguous(), None, cloud, part).found
+    assert detect_and_correct(_Ambiguous(), None, cloud, part, provisional=True).found

@@ -25,8 +25,12 @@ Pipeline (paper, "Rough detection using point cloud"), all in the world frame
    says which source the pose came from);
 5. the verified pose is tried again turned by each *hull twin* (a rotation
    keeping the convex hull, not the part); the pose the observed points
-   favour wins, and twins the view cannot tell apart are listed in
-   ``details["ambiguous"]``;
+   favour wins. When the view cannot tell a twin from it, the detection is
+   ``found: false`` ("ambiguous: ..."), the poses listed in
+   ``details["ambiguous"]`` (best-scoring first) with
+   ``details["ambiguous_kind"] = "hull_twin"``: the part can be picked by its
+   outside and looked at again once moved
+   (:func:`asmteach.core.detect_correct.detect_and_correct`'s ``provisional``);
 6. the pose is tried again turned by each *near twin* (a turn that keeps the
    part's surface within ``near_twin_tol``, e.g. a keyed peg about its axis)
    and by small nudges (``nudge_deg``) - a short coarse ICP first, the full one
@@ -35,7 +39,8 @@ Pipeline (paper, "Rough detection using point cloud"), all in the world frame
    and when a distinct one (beyond the part's symmetries, ``distinct_mm`` /
    ``distinct_deg``) scores within ``ambiguity_margin`` and the ray evidence
    does not rule it out, the view cannot tell them apart: ``found: false``
-   with the reason ("ambiguous: ...") and the poses in ``details["ambiguous"]``.
+   with the reason ("ambiguous: ...") and the poses in ``details["ambiguous"]``
+   (``details["ambiguous_kind"] = "near_twin"``).
 
 Nothing verified means ``found: false`` with the reason of the closest miss;
 a wrong pose is never reported as found.
@@ -193,7 +198,7 @@ class CvfhIcpDetector(Detector):
                 reason=f"{part.name!r} not found: best hypothesis rejected ({why})",
                 timing_ms=timing,
                 details={
-                    **({"ambiguous": outcome.details["ambiguous"]} if "ambiguous" in outcome.details else {}),
+                    **{k: outcome.details[k] for k in ("ambiguous", "ambiguous_kind") if k in outcome.details},
                     "clusters": len(clusters),
                     "clusters_tried": tried,
                     "icp_passes": icp_passes,
@@ -279,7 +284,22 @@ class CvfhIcpDetector(Detector):
         if best is not None and prep.twins:
             best, info["twins"], ambiguous = hull_twin_pass(best, job, prep, clock, s)
             if ambiguous:
-                info["ambiguous"] = ambiguous
+                # A twin of the convex hull explains every point seen as well: the view cannot say which side
+                # is which, and reporting either would be a guess. The poses go in details["ambiguous"] (the
+                # best-scoring first), so a caller that can look again once the part is moved may go on with one
+                # (detect_and_correct's ``provisional``).
+                why = (
+                    f"ambiguous: the part turned by a twin of its convex hull explains the view as well "
+                    f"({len(ambiguous)} such pose(s)); the faces that tell them apart are out of sight"
+                )
+                first = {
+                    "T_world_part": best.T_world_part.tolist(),
+                    "fitness": round(best.fitness, 4),
+                    "violation": round(best.violation, 4),
+                }
+                info["ambiguous"] = [first, *ambiguous]
+                info["ambiguous_kind"] = "hull_twin"
+                return _Outcome(None, replace(best, accepted=False, why=why), info, job.icp_passes)
         if best is not None and prep.near:
             best, rival = near_twin_pass(best, job, prep, clock, s)
             if rival is not None:
@@ -293,6 +313,7 @@ class CvfhIcpDetector(Detector):
                 info["ambiguous"] = [  # the poses the view cannot tell apart, so that callers need not read `why`
                     {"T_world_part": v.T_world_part.tolist(), "score": round(v.score, 4)} for v in (best, rival)
                 ]
+                info["ambiguous_kind"] = "near_twin"
                 return _Outcome(None, replace(best, accepted=False, why=why), info, job.icp_passes)
         info = {**info, "hypotheses": len(hyps), "cluster_points": len(cluster)}
         return _Outcome(best, closest, info, job.icp_passes)
