@@ -74,6 +74,7 @@ from asmteach.plugins.detectors.cvfh.pose_search import (
 from asmteach.plugins.detectors.cvfh.prescore import SampleIndex, near_shares, support_gap
 from asmteach.plugins.detectors.cvfh.resting import hull_twins, near_twins, resting_hypotheses, stable_rests
 from asmteach.plugins.detectors.cvfh.settings import CvfhSettings
+from asmteach.plugins.detectors.cvfh.thin import raised_mask
 from asmteach.plugins.detectors.cvfh.views import describe_cloud, load_or_build
 
 __all__ = ["CvfhIcpDetector"]
@@ -125,8 +126,9 @@ class CvfhIcpDetector(Detector):
                     R = geometry.from_rotvec(np.radians(a) * axis / np.linalg.norm(axis))[:3, :3]
                     near.append(geometry.from_rotation(R, com - R @ com))
         samples = SampleIndex.of(model, self.seed)
+        thin = float(part.mesh.bounding_box_oriented.primitive.extents.min()) < s.thin_height
         prep = Prepared(
-            model, db, diameter, built, 1000.0 * (time.perf_counter() - t0), rests, twins, near, own, samples
+            model, db, diameter, built, 1000.0 * (time.perf_counter() - t0), rests, twins, near, own, samples, thin
         )
         self._prepared[key] = prep
         return prep
@@ -159,6 +161,10 @@ class CvfhIcpDetector(Detector):
         if pts is None:
             return fail(reason or "invalid cloud")
         table, above, reason = remove_table(pts, s.segment, table=table, seed=self.seed)
+        if table is not None and prep.thin:
+            # Most of a thin part is below min_height: its low points are kept where their patch is raised.
+            raised, _ = raised_mask(pts, table, s.segment.min_height, s.segment.max_height, s.thin_cell, s.thin_sigmas)
+            above = pts[raised] if raised.sum() >= s.segment.min_cluster_points else above
         clock.lap("segment")
         if above is None or table is None:
             return fail(reason or "no table")

@@ -57,6 +57,8 @@ class Prepared:
     """The part's own symmetries (poses that differ by one are the same pose)."""
     samples: SampleIndex
     """The model's surface samples indexed for the pre-score's distance tests."""
+    thin: bool = False
+    """The part is thin enough to lie mostly below the table-removal height (``thin_height``)."""
 
 
 @dataclass

@@ -89,3 +89,17 @@ class CvfhSettings(StrictModel):
     near_off: float = Field(0.006, gt=0.0, description="near twins: a pose clearly fails a point beyond this")
     distinct_mm: float = Field(5.0, gt=0.0, description="poses farther apart than this (mm) are distinct")
     distinct_deg: float = Field(5.0, gt=0.0, description="poses turned further apart than this (deg) are distinct")
+    thin_height: float = Field(
+        0.014,
+        ge=0.0,
+        description="a part whose oriented bounding box is thinner than this (metres) may lie mostly below "
+        "segment.min_height: its points lower than that are kept where the mean height of their patch stands "
+        "clearly above the table (cvfh/thin.py; 0: never)",
+    )
+    thin_cell: float = Field(0.003, gt=0.0, description="thin parts: side of the patch squares, metres")
+    thin_sigmas: float = Field(
+        6.0,
+        gt=0.0,
+        description="thin parts: a patch is raised when its mean height exceeds the table's by this many spreads "
+        "of the patch means (measured on the frame)",
+    )
