@@ -1,7 +1,15 @@
 """Sub-pixel honest rendering of marked parts: z-buffered shaded faces, projectively textured markers.
 
 Every image pixel is the box-filtered average of ``supersample x supersample``
-samples. A sample's colour comes from the exact intersection of its camera
+samples, each placed at a random point of its own cell of the pixel's
+``supersample x supersample`` grid (stratified jitter, fixed seed). Samples at
+the cell centres would put every pixel's samples on the same few rows and
+columns: an edge near a pixel axis would then be found in steps of
+``1 / supersample`` pixel, the same step along the whole edge, so its fitted
+position is off by up to half a step (0.07 px RMS at 4 x 4, a tilt of several
+degrees for a single small marker; docs/results/teaching_precision.md,
+Session 14). Jittered, those errors differ from pixel to pixel and average out
+along the edge. A sample's colour comes from the exact intersection of its camera
 ray with the nearest triangle (the plane equation, not interpolated depth);
 on a marker face the marker's cell grid is looked up at the exact point in
 the marker frame, so marker edges are geometric edges, anti-aliased only by
@@ -24,6 +32,8 @@ __all__ = ["RenderObject", "Rendered", "render_scene"]
 
 PAPER_WHITE = 0.92
 INK_BLACK = 0.05
+JITTER_SEED = 20261126
+"""Seed of the sample jitter: the same scene renders to the same image."""
 
 
 @dataclass
@@ -98,14 +108,19 @@ def render_scene(
     if x1 <= x0 or y1 <= y0:
         return out
     W, H = (x1 - x0) * S, (y1 - y0) * S
-    # Sample centres in image coordinates: pixel u covers [u - 0.5, u + 0.5).
-    us = x0 - 0.5 + (np.arange(W) + 0.5) / S
-    vs = y0 - 0.5 + (np.arange(H) + 0.5) / S
-    # Ray direction (z = 1) of every sample, separable for a pinhole camera without skew.
-    rx = (us - K[0, 2]) / K[0, 0]
-    ry = (vs - K[1, 2]) / K[1, 1]
-    rx = rx.astype(np.float32)
-    ry = ry.astype(np.float32)
+    # Sample (i, j) lies in cell (i, j) of the sample grid, at (j + jx, i + jy) in grid units with jx, jy in
+    # [0, 1); pixel u covers [u - 0.5, u + 0.5). One sample per pixel stays at the pixel centre (no
+    # anti-aliasing to decorrelate; the visibility masks stay on the pixel grid).
+    if S > 1:
+        rng = np.random.default_rng(JITTER_SEED)
+        gxs = np.arange(W, dtype=np.float32)[None, :] + rng.random((H, W), dtype=np.float32)
+        gys = np.arange(H, dtype=np.float32)[:, None] + rng.random((H, W), dtype=np.float32)
+    else:
+        gxs = np.broadcast_to(np.arange(W, dtype=np.float32)[None, :] + np.float32(0.5), (H, W))
+        gys = np.broadcast_to(np.arange(H, dtype=np.float32)[:, None] + np.float32(0.5), (H, W))
+    # Ray direction (z = 1) of every sample.
+    rx = ((x0 - 0.5 + gxs.astype(np.float64) / S - K[0, 2]) / K[0, 0]).astype(np.float32)
+    ry = ((y0 - 0.5 + gys.astype(np.float64) / S - K[1, 2]) / K[1, 1]).astype(np.float32)
     depth = np.full((H, W), np.inf, np.float32)
     tri_id = np.full((H, W), -1, np.int32)  # index into the stacked triangles of all objects
     light = np.asarray(light_dir_cam, float)
@@ -117,9 +132,9 @@ def render_scene(
         tris = cam_v[ob.mesh.faces]  # (m, 3, 3)
         normals = ob.mesh.face_normals @ ob.T_cam_obj[:3, :3].T
         uv = _project(K, tris.reshape(-1, 3)).reshape(-1, 3, 2)
-        # Sample-grid coordinates of the vertices (sample (i, j) is at grid point (j, i)).
-        gx = (uv[..., 0] - (x0 - 0.5)) * S - 0.5
-        gy = (uv[..., 1] - (y0 - 0.5)) * S - 0.5
+        # Sample-grid coordinates of the vertices (cell (i, j) spans [j, j + 1) x [i, i + 1)).
+        gx = (uv[..., 0] - (x0 - 0.5)) * S
+        gy = (uv[..., 1] - (y0 - 0.5)) * S
         tri_owner += [oi] * len(tris)
         tri_normal.append(normals)
         tri_color += [ob.color_rgb] * len(tris)
@@ -130,26 +145,26 @@ def render_scene(
                 continue
             xa, ya = gx[fi], gy[fi]
             bx0 = max(int(np.floor(xa.min())), 0)
-            bx1 = min(int(np.ceil(xa.max())) + 1, W)
+            bx1 = min(int(np.floor(xa.max())) + 1, W)
             by0 = max(int(np.floor(ya.min())), 0)
-            by1 = min(int(np.ceil(ya.max())) + 1, H)
+            by1 = min(int(np.floor(ya.max())) + 1, H)
             if bx1 <= bx0 or by1 <= by0:
                 continue
             area = (xa[1] - xa[0]) * (ya[2] - ya[0]) - (ya[1] - ya[0]) * (xa[2] - xa[0])
             if abs(area) < 1e-12:
                 continue
             sgn = np.sign(area)
-            X = np.arange(bx0, bx1, dtype=np.float32)
-            Y = np.arange(by0, by1, dtype=np.float32)
+            win_ = (slice(by0, by1), slice(bx0, bx1))
+            X, Y = gxs[win_], gys[win_]
             inside = None
-            # Edge functions are affine in x and y: build each from a row and a column vector.
             for a_, b_ in ((0, 1), (1, 2), (2, 0)):
-                ex = np.float32(-sgn * (ya[b_] - ya[a_])) * (X - np.float32(xa[a_]))
-                ey = np.float32(sgn * (xa[b_] - xa[a_])) * (Y - np.float32(ya[a_]))
-                e = (ey[:, None] + ex[None, :]) >= 0
+                e = (
+                    np.float32(-sgn * (ya[b_] - ya[a_])) * (X - np.float32(xa[a_]))
+                    + np.float32(sgn * (xa[b_] - xa[a_])) * (Y - np.float32(ya[a_]))
+                ) >= 0
                 inside = e if inside is None else inside & e
             # Exact ray-plane depth: z = (n . p0) / (n . (rx, ry, 1)).
-            denom = (np.float32(n[1]) * ry[by0:by1] + np.float32(n[2]))[:, None] + np.float32(n[0]) * rx[bx0:bx1]
+            denom = np.float32(n[0]) * rx[win_] + np.float32(n[1]) * ry[win_] + np.float32(n[2])
             with np.errstate(divide="ignore", invalid="ignore"):
                 z = np.float32(np.dot(n, p0)) / denom
             cur = depth[by0:by1, bx0:bx1]
@@ -179,19 +194,19 @@ def render_scene(
             half = 0.5 * m.size + ob.quiet_zone_cells * cell
             corners = np.array([[-half, half, 0], [half, half, 0], [half, -half, 0], [-half, -half, 0]])
             q = _project(K, corners @ R.T + t)
-            qx = (q[:, 0] - (x0 - 0.5)) * S - 0.5
-            qy = (q[:, 1] - (y0 - 0.5)) * S - 0.5
+            qx = (q[:, 0] - (x0 - 0.5)) * S
+            qy = (q[:, 1] - (y0 - 0.5)) * S
             bx0 = max(int(np.floor(qx.min())), 0)
-            bx1 = min(int(np.ceil(qx.max())) + 1, W)
+            bx1 = min(int(np.floor(qx.max())) + 1, W)
             by0 = max(int(np.floor(qy.min())), 0)
-            by1 = min(int(np.ceil(qy.max())) + 1, H)
+            by1 = min(int(np.floor(qy.max())) + 1, H)
             if bx1 <= bx0 or by1 <= by0:
                 continue
             sub = (slice(by0, by1), slice(bx0, bx1))
-            rxs, rys = rx[bx0:bx1].astype(np.float64), ry[by0:by1].astype(np.float64)
+            rxs, rys = rx[sub].astype(np.float64), ry[sub].astype(np.float64)
 
             def affine(v: np.ndarray, rxs: np.ndarray = rxs, rys: np.ndarray = rys) -> np.ndarray:
-                return (v[1] * rys + v[2])[:, None] + v[0] * rxs[None, :]
+                return v[0] * rxs + v[1] * rys + v[2]
 
             with np.errstate(divide="ignore", invalid="ignore"):
                 lam = np.dot(nz, t) / affine(nz)  # depth of the ray / marker-plane point
@@ -199,10 +214,7 @@ def render_scene(
             lx = lam * affine(R[:, 0]) - np.dot(R[:, 0], t)
             ly = lam * affine(R[:, 1]) - np.dot(R[:, 1], t)
             on_face = (
-                (owner[sub] == oi)
-                & (np.abs(depth[sub] - lam) < 2e-4)
-                & (np.abs(lx) <= half)
-                & (np.abs(ly) <= half)
+                (owner[sub] == oi) & (np.abs(depth[sub] - lam) < 2e-4) & (np.abs(lx) <= half) & (np.abs(ly) <= half)
             )
             if not on_face.any():
                 continue
