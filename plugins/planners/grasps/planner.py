@@ -11,7 +11,10 @@ Pipeline (part frame, metres, radians):
    part has no opposing surfaces;
 4. palm orientations about the grasp axis: ``orientations`` evenly spaced,
    plus, per stable resting pose of the part (the placements the regrasp
-   planner uses), the one approaching most steeply from above in that pose;
+   planner uses), the one approaching most steeply from above in that pose,
+   and per pair of the ``bridge_poses`` most probable poses at most 120 deg
+   apart, the one nearest their bisector (a grasp from above in both, that
+   can turn the part over from one to the other);
 5. the soft-pad contact model (:mod:`.contact`): each pad is flat with a
    ``compliance`` deep soft layer; the surface within that depth of the first
    touch is its contact patch (a patch on a plane, a strip on a cylinder, a
@@ -88,6 +91,7 @@ from asmteach.plugins.planners.grasps.sampling import ContactPairs, Raycaster, f
 from asmteach.plugins.planners.grasps.selection import (
     MIN_STEEPNESS,
     Candidates,
+    bridge_directions,
     resting_directions,
     select_grasps,
 )
@@ -97,7 +101,7 @@ __all__ = ["AntipodalGraspPlanner", "default_cache_dir"]
 
 log = logging.getLogger(__name__)
 
-CACHE_VERSION = 4
+CACHE_VERSION = 5
 # Shallow grasps set back less than this (metres) are the centred grasp again, for every purpose.
 _MIN_SET_BACK = 1e-3
 
@@ -212,7 +216,10 @@ class AntipodalGraspPlanner(GraspPlanner):
         # A round part rests in hundreds of poses (a sphere on each facet), each nearly improbable: the
         # most probable ones get their own steepest approach (the rest are covered by the orientation grid).
         down = resting_directions(part)[: s.rest_poses]
-        R, pair_idx = self._orientations(pairs, mesh.extents, down)
+        # Grasps that turn the part over: between two of the most probable poses (module docstring, step 4).
+        bridge_dirs, bridges = bridge_directions(down[: s.bridge_poses])
+        stats["bridges"] = len(bridges)
+        R, pair_idx = self._orientations(pairs, mesh.extents, np.concatenate([down, bridge_dirs]))
         stats["candidates"] = len(pair_idx)
         cand, counts = self._contacts(part, rc, hand, pairs, R, pair_idx)
         stats.update(counts)
@@ -221,7 +228,7 @@ class AntipodalGraspPlanner(GraspPlanner):
         if len(cand.pair_idx) == 0:
             raise UserError(self._no_contact_reason(part, hand, counts))
         score = self._score(part, pairs, angles, cand.pair_idx, cand.support, cone, mesh.extents)
-        grasps, n_dup, n_col, kept = select_grasps(part, hand, pairs, cand, score, down, s)
+        grasps, n_dup, n_col, kept = select_grasps(part, hand, pairs, cand, score, down, s, bridges)
         stats.update(duplicates=n_dup, colliding=n_col, kept=len(grasps))
         if len(kept):
             stats["contact_share_median"] = round(float(np.median(cand.share[kept])), 3)

@@ -9,6 +9,16 @@ apart), best score first. Each round gives every bucket one kept grasp:
 near-duplicates of kept grasps are skipped, then hand-part collisions
 (python-fcl), until ``max_grasps`` are kept.
 
+Turning a part over takes a grasp that approaches from above in two resting
+poses: it picks the part up in one and puts it down in the other. A grasp
+steep in one pose is nearly horizontal in a pose 90 deg away, so such grasps
+approach along a *bridge* (:func:`bridge_directions`): the bisector of two
+resting directions at most 120 deg apart, within 60 deg of straight down in
+both. A shallow candidate steepest along a bridge belongs to that bridge's
+bucket, taken by the hand's clearance above the table in the worse of its
+two poses. Without them a peg standing on its head has only grasps on its
+shank from above, horizontal once it lies down, and cannot be turned over.
+
 Part frame, metres; TCP frames as :class:`~asmteach.core.models.Grasp` has them.
 """
 
@@ -31,6 +41,7 @@ __all__ = [
     "CONTACT_GAP",
     "MIN_STEEPNESS",
     "Candidates",
+    "bridge_directions",
     "resting_directions",
     "round_robin_queues",
     "select_grasps",
@@ -78,6 +89,7 @@ def select_grasps(
     score: np.ndarray,
     down: np.ndarray,
     s: AntipodalSettings,
+    bridges: np.ndarray | None = None,
 ) -> tuple[list[Grasp], int, int, np.ndarray]:
     """Round robin over the buckets, best first in each: skip near-duplicates of kept grasps, then collisions.
 
@@ -86,8 +98,9 @@ def select_grasps(
     duplicates before collisions gives the same set as filtering collisions
     first (a candidate is only ever compared with kept, collision-free
     grasps) while calling fcl far less. The result is sorted by score, best
-    first, ids ``0..n-1``; ``down``: resting directions (part frame). Also returns the duplicate and
-    collision counts and the kept candidates' indices, in the grasps' order.
+    first, ids ``0..n-1``; ``down``: resting directions (part frame); ``bridges``: ``(k, 2)`` pairs of their
+    indices whose bisectors get buckets of their own (:func:`bridge_directions`). Also returns the duplicate
+    and collision counts and the kept candidates' indices, in the grasps' order.
     """
     collider = MeshCollider({"part": (part.mesh, np.eye(4))})
     cos_tol = np.cos(np.radians(s.dedup_angle_deg))
@@ -98,7 +111,7 @@ def select_grasps(
     opening = np.minimum(pairs.width[cand.pair_idx] + 2.0 * s.clearance, hand.max_width)
     if s.approach_opening == "full":
         opening = np.full(len(R), float(hand.max_width))
-    queues = round_robin_queues(part, hand, cand, tcp_all, opening, down, score, s.approach_bins)
+    queues = round_robin_queues(part, hand, cand, tcp_all, opening, down, score, s.approach_bins, bridges)
     kept: list[int] = []
     kept_t = np.zeros((0, 3))
     kept_R = np.zeros((0, 3, 3))
@@ -173,6 +186,35 @@ def resting_directions(part: PartModel) -> np.ndarray:
     return np.array([p.T_table_part[:3, :3].T @ np.array([0.0, 0.0, -1.0]) for p in placements]).reshape(-1, 3)
 
 
+def bridge_directions(down: np.ndarray, max_angle_deg: float = 120.0) -> tuple[np.ndarray, np.ndarray]:
+    """Bisectors ``(k, 3)`` (part frame, unit) of the pairs of resting directions ``down`` (``(u, 3)``) at most
+    ``max_angle_deg`` apart, and the pairs ``(k, 2)`` (indices into ``down``).
+
+    A grasp approaching along a bisector comes from above in both poses (cosine ``cos(angle / 2)`` to each
+    resting direction: at least 0.5 at 120 deg), so it can put the part down in one and have picked it up in
+    the other. Bisectors within 5 deg of one already listed are left out (a symmetric part's poses give the
+    same turn many times over), keeping the first pair, most probable poses first.
+    """
+    down = np.asarray(down, float).reshape(-1, 3)
+    dirs: list[np.ndarray] = []
+    pairs: list[tuple[int, int]] = []
+    cos_max, cos_same = np.cos(np.radians(max_angle_deg)), np.cos(np.radians(5.0))
+    for i in range(len(down)):
+        for j in range(i + 1, len(down)):
+            if float(down[i] @ down[j]) < cos_max - 1e-9:
+                continue
+            b = down[i] + down[j]
+            n = float(np.linalg.norm(b))
+            if n < 1e-9:
+                continue
+            b = b / n
+            if any(float(b @ d) > cos_same for d in dirs):
+                continue
+            dirs.append(b)
+            pairs.append((i, j))
+    return np.array(dirs).reshape(-1, 3), np.array(pairs, dtype=int).reshape(-1, 2)
+
+
 def table_gaps(
     part: PartModel, hand: HandSpec, R: np.ndarray, tcp: np.ndarray, opening: np.ndarray, down: np.ndarray
 ) -> np.ndarray:
@@ -216,6 +258,7 @@ def round_robin_queues(
     down: np.ndarray,
     score: np.ndarray,
     bins: int,
+    bridges: np.ndarray | None = None,
 ) -> list[deque[int]]:
     """Candidate indices per bucket, in the order they are tried; the buckets in the order of their first
     candidate's score (ties by index everywhere, so the order is deterministic).
@@ -225,16 +268,26 @@ def round_robin_queues(
     the table, so these buckets are taken by the hand's clearance above the table in that pose
     (:func:`table_gaps`), highest first in ``_GAP_STEP`` steps, then by score. Every other candidate
     belongs to the nearest of ``bins`` approach directions (centred or shallow apart), best score first.
+    ``bridges``: ``(k, 2)`` pairs of indices into ``down`` (:func:`bridge_directions`); a shallow candidate
+    steepest along one's bisector belongs to that bridge, taken by the hand's clearance in the worse of the
+    two poses.
     """
     m = len(score)
     approach = cand.R[:, :, 2]
     bucket = np.argmax(approach @ sphere_directions(bins).T, axis=1) * 2 + cand.shallow.astype(int)
     steps = np.zeros(m)
     if len(down):
-        cosines = approach @ down.T
+        pairs = np.zeros((0, 2), dtype=int) if bridges is None else np.asarray(bridges, dtype=int).reshape(-1, 2)
+        mid = down[pairs[:, 0]] + down[pairs[:, 1]]
+        dirs = np.concatenate([down, mid / np.linalg.norm(mid, axis=1, keepdims=True)])
+        # a bridge pose's two resting poses; a resting pose is its own pair
+        both = np.concatenate([np.repeat(np.arange(len(down))[:, None], 2, axis=1), pairs])
+        cosines = approach @ dirs.T
         pose = np.argmax(cosines, axis=1)
         rest = cand.shallow & (cosines[np.arange(m), pose] >= MIN_STEEPNESS)
-        gap = table_gaps(part, hand, cand.R[rest], tcp[rest], opening[rest], down)[np.arange(rest.sum()), pose[rest]]
+        gaps = table_gaps(part, hand, cand.R[rest], tcp[rest], opening[rest], down)
+        k = np.arange(rest.sum())
+        gap = np.minimum(gaps[k, both[pose[rest], 0]], gaps[k, both[pose[rest], 1]])
         bucket[rest] = 2 * bins + pose[rest]
         steps[rest] = -np.floor(gap / _GAP_STEP)
     order = np.lexsort((np.arange(m), -score, steps, bucket))

@@ -92,6 +92,13 @@ class AntipodalSettings(StrictModel):
         description="resting poses of the part (most probable first) that each get, per contact pair, the "
         "orientation approaching most steeply from above, and their own buckets in the selection",
     )
+    bridge_poses: int = Field(
+        10,
+        ge=0,
+        le=100,
+        description="the most probable resting poses whose pairs (at most 120 deg apart) get grasps approaching "
+        "along their bisector, from above in both, to turn the part over with (0: none)",
+    )
     weights: ScoreWeights = Field(default_factory=ScoreWeights, description="weights of the grasp score's terms")
     cache: bool = Field(True, description="read and write the on-disk cache")
     cache_dir: str | None = Field(None, description="cache folder; default $ASMTEACH_CACHE_DIR or ~/.cache/asmteach")

@@ -17,10 +17,17 @@ import pytest
 from asmteach.core import geometry
 from asmteach.core.hand_geometry import MeshCollider, hand_boxes, pad_grid
 from asmteach.core.interfaces import PartModel
-from asmteach.core.models import Grasp, HandSpec, Primitive
+from asmteach.core.models import Grasp, HandSpec, PartSpec, Primitive, SolidSpec
+from asmteach.core.parts import build_part
+from asmteach.core.rests.placements import compute_placements
 from asmteach.plugins.planners.grasps.filtering import filter_grasps_at_pose
 from asmteach.plugins.planners.grasps.planner import AntipodalGraspPlanner
-from asmteach.plugins.planners.grasps.selection import resting_directions, sphere_directions, table_gaps
+from asmteach.plugins.planners.grasps.selection import (
+    bridge_directions,
+    resting_directions,
+    sphere_directions,
+    table_gaps,
+)
 
 _DOWN = np.array([0.0, 0.0, -1.0])
 
@@ -178,3 +185,48 @@ def test_fully_open_hand_clear_of_the_part(make_box, hand) -> None:
     assert not any(open_hits(g) for g in full)
     # the pre-shaped hand may go into the channel: some of those grasps would hit the part fully open
     assert any(open_hits(g) for g in shaped)
+
+
+def test_bridge_directions_of_a_box(bar) -> None:
+    """A box rests on six faces: each of the 12 pairs 90 deg apart gets its bisector, opposite faces none."""
+    down = resting_directions(bar)
+    dirs, pairs = bridge_directions(down)
+    assert dirs.shape == (12, 3) and pairs.shape == (12, 2)
+    np.testing.assert_allclose(np.linalg.norm(dirs, axis=1), 1.0, atol=1e-12)
+    for d, (i, j) in zip(dirs, pairs, strict=True):
+        assert d @ down[i] == pytest.approx(np.sqrt(0.5)) and d @ down[j] == pytest.approx(np.sqrt(0.5))
+    assert bridge_directions(down, max_angle_deg=60.0)[0].shape == (0, 3)
+
+
+def _turning_grasps(hand: HandSpec, part: PartModel, grasps: list[Grasp], pose_a, pose_b) -> list[Grasp]:
+    """Grasps approaching within 60 deg of straight down with the open hand above the table in both poses."""
+    out = []
+    for g in grasps:
+        ok = True
+        for p in (pose_a, pose_b):
+            T = p.T_table_part @ g.T_part_tcp
+            ok &= bool(T[:3, 2] @ _DOWN >= 0.5) and _lowest_z(hand, g, p.T_table_part) > 0.0
+        if ok:
+            out.append(g)
+    return out
+
+
+def test_headed_peg_on_its_head_can_be_turned_over(hand) -> None:
+    """A peg standing on its 40 mm head: from above only its shank is free of the table, and grasps steep
+    there lie horizontal once the peg lies on its side. Bridge grasps (from above in both) turn it over;
+    without them (``bridge_poses: 0``) only a few of the orientation grid's do."""
+    head = Primitive(shape="box", size=[0.040, 0.040, 0.016], pose={"xyz": [0, 0, 0.026]})
+    shank = Primitive(shape="box", size=[0.018, 0.018, 0.018], pose={"xyz": [0, 0, 0.009]})
+    peg = build_part(PartSpec(name="headed_peg", solid=SolidSpec(add=[head, shank])))
+    placements = compute_placements(peg)
+    on_head = next(p for p in placements if p.T_table_part[:3, :3].T @ _DOWN @ [0, 0, 1] > 0.99)
+    on_side = [p for p in placements if abs(p.T_table_part[:3, :3].T @ _DOWN @ [0, 0, 1]) < 0.01]
+    assert on_side
+
+    def turning(settings: dict) -> int:
+        grasps = AntipodalGraspPlanner({"cache": False, **settings}, seed=3).plan(peg, hand)
+        return sum(len(_turning_grasps(hand, peg, grasps, on_head, p)) for p in on_side)
+
+    with_bridges, without = turning({}), turning({"bridge_poses": 0})
+    assert with_bridges >= 12  # 19 when written
+    assert with_bridges > 3 * without  # 3 without: the orientation grid's few at 45 deg
