@@ -19,6 +19,7 @@ from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
 from asmteach.core.perception.registration import (
     ModelCloud,
     RefineSettings,
+    _free_space_violation,
     model_cloud,
     ray_depths,
     surface_check,
@@ -97,6 +98,33 @@ def test_the_pruned_ray_tree_counts_what_the_full_one_does(scene_and_model, turn
     assert (got.visible, got.explained, got.seen_through, got.in_front, got.missing) == _surface_counts_unpruned(
         geometry.invert(T), context, model, s
     )
+
+
+def _violation_every_ray(T_part_world: np.ndarray, context: np.ndarray, model: ModelCloud, margin: float) -> float:
+    """The free-space share with a ray cast to every seen point near the part (the code before the speed-up)."""
+    local = geometry.transform_points(T_part_world, context)
+    near = np.linalg.norm(local - model.center, axis=1) < 1.5 * model.radius + 0.01
+    eye = geometry.transform_points(T_part_world, np.asarray(DEFAULT_EYE, float)[None])[0]
+    hit, dist = ray_depths(model, eye, local[near])
+    return float(np.mean(hit < dist - margin))
+
+
+@pytest.mark.parametrize("shift", [0.0, 0.01, 0.03])
+@pytest.mark.parametrize("turn_deg", [0.0, 20.0, 90.0])
+def test_the_free_space_share_casts_fewer_rays_to_the_same_share(
+    scene_and_model, turn_deg: float, shift: float
+) -> None:  # type: ignore[no-untyped-def]
+    scene, model = scene_and_model
+    cluster = scene.cloud[scene.frame.labels == 1]
+    context = scene.cloud[np.linalg.norm(scene.cloud - cluster.mean(axis=0), axis=1) < 0.1]
+    c = cluster.mean(axis=0)
+    R = geometry.rot_z(np.radians(turn_deg))[:3, :3]
+    # Turned and lifted or sunk into the table (toward the camera at shift 0.03): shares from 0 to large.
+    T = geometry.from_rotation(R, c - R @ c + [0.0, 0.0, shift - 0.01]) @ scene.T_world_part
+    T_part_world = geometry.invert(T)
+    margin = RefineSettings().occlusion_margin
+    got = _free_space_violation(T_part_world, context, DEFAULT_EYE, model, margin)
+    assert got == _violation_every_ray(T_part_world, context, model, margin)
 
 
 def test_batched_near_shares_equal_one_query_per_pose(scene_and_model) -> None:  # type: ignore[no-untyped-def]
