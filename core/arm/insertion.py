@@ -61,7 +61,8 @@ class ContactSensing(Protocol):
 class InsertionSettings:
     """How the guarded insertion moves and what it calls resistance.
 
-    ``step_m``: TCP travel between two readings; ``speed_m_s``: TCP speed along the line; ``slip_limit_m``
+    ``step_m``: TCP travel between two readings; ``speed_m_s``: TCP speed along the line (None: the planned
+    trajectory's mean speed); ``slip_limit_m``
     and ``force_limit_n``: resistance (slip of the part in the hand since the start, contact force between the
     parts); ``seated_m``: resistance this close to the planned end is the part seated; ``backoff_m``: how far
     it backs out before a sideways correction; ``search_step_m`` and ``search_radius_m``: size of one sideways
@@ -69,7 +70,7 @@ class InsertionSettings:
     """
 
     step_m: float = 0.0005
-    speed_m_s: float = 0.02
+    speed_m_s: float | None = None
     slip_limit_m: float = 0.0004
     force_limit_n: float = 20.0
     seated_m: float = 0.0015
@@ -154,6 +155,9 @@ class _Guard:
         self.T_other0 = robot.part_pose(other) if other else None
         self.seconds = 0.0
         self.other_moved, self.other_moved_t = 0.0, None
+        seconds = float(traj.times[-1] - traj.times[0])
+        planned = self.length / seconds if seconds > 1e-9 else 0.02
+        self.speed = s.speed_m_s if s.speed_m_s is not None else min(max(planned, 0.005), 0.1)
         self.names = robot.joint_names(self.arm)
         self.v_max = np.asarray(robot.speed_limits(self.arm), dtype=float)
 
@@ -170,7 +174,7 @@ class _Guard:
         if not ik.success or ik.q is None:
             return False
         dist = float(np.linalg.norm(self.robot.fk(self.arm, q0)[:3, 3] - T[:3, 3]))
-        dt = max(dist / self.s.speed_m_s, 1.2 * float(np.max(np.abs(ik.q - q0) / self.v_max)), 0.01)
+        dt = max(dist / self.speed, 1.2 * float(np.max(np.abs(ik.q - q0) / self.v_max)), 0.01)
         self.robot.execute(
             Trajectory(arm=self.arm, joint_names=self.names, times=[0.0, dt], positions=np.vstack([q0, ik.q]))
         )

@@ -32,7 +32,9 @@ def execute_stage(run: Run, robot: Robot, plan: Plan, stage: str = "execute") ->
             except NotImplementedError:  # World.sense_rgb is optional: no colour camera, no animation
                 record = False
                 d["animation"] = f"not recorded: {type(robot).__name__} has no colour camera"
-        trace = ExecutionTrace(robot, plan_parts(plan), run.report.robot_seconds.get("total", 0.0))
+        task = run.report.task  # the plan may move B alone (after look_again): A is watched all the same
+        parts = plan_parts(plan) + ([task.part_a.name, task.part_b.name] if task is not None else [])
+        trace = ExecutionTrace(robot, list(dict.fromkeys(parts)), run.report.robot_seconds.get("total", 0.0))
         d["trace"] = trace.events
         for seg in plan.segments:
             if seg.trajectory is not None:
