@@ -387,17 +387,21 @@ def surface_check(
     # Rays as points of a plane one metre in front of the eye, facing the part: nearest ray = nearest pixel.
     axis, plane = ray_plane(model.center - eye)
     obs = geometry.transform_points(T_part_world, context) - eye
-    obs_dist = np.linalg.norm(obs, axis=1)
-    ahead = obs @ axis > 0
-    obs, obs_dist = obs[ahead], obs_dist[ahead]
-    if len(obs) == 0:
-        return SurfaceCheck(len(vis), 0, 0, 0, len(vis))
-    seen, asked = plane(obs / obs_dist[:, None]), plane(unit[vis])
+    asked = plane(unit[vis])
     # Only a seen ray within ray_radius of some model ray can answer: keep those inside the model rays'
     # bounding box grown by ray_radius (a superset of every answer, so each nearest ray within the bound is
     # the same). The tree then holds the few hundred rays around the part, not the ~12 000 seen points of
     # the context (table mostly): building it was half of verify's time.
     lo, hi = asked.min(axis=0) - 1.01 * ray_radius, asked.max(axis=0) + 1.01 * ray_radius
+    # The box lies within the cone tan^2(angle to the axis) <= 2 b^2 (b its largest |coordinate|): the seen
+    # rays outside it (most of the context) are dropped before their projection; the slack only keeps more.
+    along = obs @ axis
+    sq = np.einsum("ij,ij->i", obs, obs)
+    b2 = 2.0 * float(np.max(np.maximum(np.abs(lo), np.abs(hi)))) ** 2 * (1.0 + 1e-6) + 1e-12
+    cone = np.flatnonzero((along > 0) & (sq - along * along <= b2 * along * along))
+    obs = obs[cone]
+    obs_dist = np.linalg.norm(obs, axis=1)
+    seen = plane(obs / obs_dist[:, None])
     keep = np.flatnonzero(np.all((seen >= lo) & (seen <= hi), axis=1))
     if len(keep) == 0:
         return SurfaceCheck(len(vis), 0, 0, 0, len(vis))
