@@ -52,10 +52,15 @@ class FailureCause(enum.StrEnum):
     EXECUTION_DROP = "execution_drop"
     """During execution a hand did not close on its part (it is not where the plan assumed)."""
     JAM = "jam"
-    """Assembled outside tolerance, with B pushed in the hand during an insertion: it met resistance there."""
+    """Assembled outside tolerance after an insertion that did not get in: the guarded insertion stopped short
+    at its force limit (depth, contact force and time in ``failure_details``), or B was pushed in the hand
+    during an insertion."""
     TOPPLE = "topple"
-    """A part tipped over (reserved: no stage records structured evidence of it yet)."""
+    """Assembled outside tolerance after a part no hand held tipped over during a motion (which motion, when,
+    how far it tilted: the execution trace's event)."""
     OFF_GOAL = "off_goal"
-    """Assembled outside tolerance with no jam on an insertion: a part ended off its goal."""
+    """Assembled outside tolerance with no jam or topple: a part ended off its goal (moved by a named motion,
+    pushed in the hand while placed, tilted as it was let go; else the insertion's error split into grasp,
+    A's placement and taught pose)."""
     OTHER = "other"
     """Anything else: bad input met late, an internal error, a plugin's own failure without a cause."""
