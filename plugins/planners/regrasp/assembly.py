@@ -173,10 +173,13 @@ def plan_transfer(
     start_slot = PoseSlot("start", "start", np.asarray(T_start, float))
 
     def start_and_goal() -> list[GraspFeasibility]:
+        """The start layer, then one goal layer per goal slot (a symmetric part's equivalent poses)."""
         nonlocal scene
         scene = cleared_scene(scene, world)
         start = evaluate(start_slot)
-        return [start, evaluate(goal.slot, goal.on_table, prefer=_grasp_ids([start]))]
+        return [start] + [evaluate(slot, goal.on_table, prefer=_grasp_ids([start])) for slot in goal.slots]
+
+    n_end = 1 + len(goal.slots)  # layers[:n_end]: the start and the goal layers; the middle ones follow
 
     def graph(layers: list[GraspFeasibility]) -> nx.Graph:
         return build_regrasp_graph(
@@ -184,7 +187,7 @@ def plan_transfer(
         )
 
     layers = start_and_goal()
-    stats: dict[str, Any] = {"feasible": {"start": len(layers[0].solutions), "goal": len(layers[1].solutions)}}
+    stats: dict[str, Any] = {"feasible": _feasible(layers, n_end)}
     G = graph(layers)
     middle_done = widened = False
     slots: list[PoseSlot] = []
@@ -221,12 +224,12 @@ def plan_transfer(
             tg = time.perf_counter()
             slots = list(middle_slots(False))
             layers += middle_layers(slots, _grasp_ids(layers))
-            stats["feasible"]["middle"] = sum(len(f.solutions) for f in layers[2:])
+            stats["feasible"]["middle"] = sum(len(f.solutions) for f in layers[n_end:])
             G = graph(layers)
             middle_done = True
             stats["graph_seconds"] += time.perf_counter() - tg
             if progress:
-                progress(f"{part.name}: no direct grasp; {len(layers) - 2} intermediate placements added")
+                progress(f"{part.name}: no direct grasp; {len(layers) - n_end} intermediate placements added")
             continue
         if not search.success and not widened and settings.max_placements > 0:
             # Turning a part over takes grasps that two placements share, and there are few: only grasps
@@ -238,12 +241,7 @@ def plan_transfer(
             slots = list(middle_slots(True))
             layers = start_and_goal()
             layers += middle_layers(slots, _grasp_ids(layers))
-            stats["feasible"] = {
-                "start": len(layers[0].solutions),
-                "goal": len(layers[1].solutions),
-                "middle": sum(len(f.solutions) for f in layers[2:]),
-                "widened": True,
-            }
+            stats["feasible"] = {**_feasible(layers, n_end), "widened": True}
             G = graph(layers)
             stats["graph_seconds"] += time.perf_counter() - tg
             if progress:
@@ -268,7 +266,7 @@ def plan_transfer(
             stats.setdefault("relocations", []).append(fraction)
             if moved:
                 layers += middle_layers(moved, _grasp_ids(layers))
-                stats["feasible"]["middle"] = sum(len(f.solutions) for f in layers[2:])
+                stats["feasible"]["middle"] = sum(len(f.solutions) for f in layers[n_end:])
                 G = graph(layers)
             stats["graph_seconds"] += time.perf_counter() - tg
             if progress:
@@ -283,8 +281,10 @@ def plan_transfer(
         stats["graph_edges"] = G.number_of_edges()
         if not search.success:
             reason = search.reason or "no keyframe path"
-            if search.cut in ("start", "goal"):
-                reason += f": {layers[0 if search.cut == 'start' else 1].summary()}"
+            if search.cut == "start":
+                reason += f": {layers[0].summary()}"
+            elif search.cut == "goal":
+                reason += ": " + "; ".join(f.summary() for f in layers[1:n_end])
             if last_reason is not None:
                 reason += f"; last motion failure: {last_reason}"
             stats.update(cut=search.cut, components=search.components)
@@ -296,7 +296,7 @@ def plan_transfer(
                 stats=_rounded(stats),
                 layers=[f.counts() for f in layers],
                 scene=scene,
-                cause=_search_cause(search, layers),
+                cause=_search_cause(search, layers, n_end),
             )
         attempts += 1
         tm = time.perf_counter()
@@ -356,17 +356,28 @@ def plan_transfer(
         )
 
 
-def _search_cause(search: KeyframeSearch, layers: Sequence[GraspFeasibility]) -> FailureCause:
-    """Why a keyframe search failed, from where it is cut (:attr:`KeyframeSearch.cut`) and the layers' solutions.
+def _search_cause(search: KeyframeSearch, layers: Sequence[GraspFeasibility], n_end: int = 2) -> FailureCause:
+    """Why a keyframe search failed, from where it is cut (:attr:`KeyframeSearch.cut`) and the layers' solutions
+    (``layers[0]`` the start, ``layers[1:n_end]`` the goal slots).
 
-    Cut at the start or the goal with no feasible grasp in that layer: ``no_grasp``. Cut there although the
-    layer had feasible grasps: every one of them was banned after its motion failed, so ``motion``. Cut
-    between the layers (no grasp connects them, banned edges included): ``regrasp_graph``.
+    Cut at the start or the goal with no feasible grasp in that layer (at any goal slot): ``no_grasp``. Cut
+    there although it had feasible grasps: every one of them was banned after its motion failed, so
+    ``motion``. Cut between the layers (no grasp connects them, banned edges included): ``regrasp_graph``.
     """
     if search.cut in ("start", "goal"):
-        layer = layers[0 if search.cut == "start" else 1]
-        return FailureCause.NO_GRASP if not layer.solutions else FailureCause.MOTION
+        cut = layers[:1] if search.cut == "start" else layers[1:n_end]
+        return FailureCause.NO_GRASP if not any(f.solutions for f in cut) else FailureCause.MOTION
     return FailureCause.REGRASP_GRAPH
+
+
+def _feasible(layers: Sequence[GraspFeasibility], n_end: int) -> dict[str, int]:
+    """Feasible grasp variants of the start, the goal slots together and the middle layers (after ``n_end``)."""
+    out = {"start": len(layers[0].solutions), "goal": sum(len(f.solutions) for f in layers[1:n_end])}
+    if n_end > 2:
+        out["goal_slots"] = n_end - 1
+    if len(layers) > n_end:
+        out["middle"] = sum(len(f.solutions) for f in layers[n_end:])
+    return out
 
 
 def _grasp_ids(layers: Sequence[GraspFeasibility]) -> set[int]:

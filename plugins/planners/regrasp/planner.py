@@ -9,6 +9,10 @@ up, is a rib beside A's face is easier to hold when A lies flat and B slides
 in sideways).
 Part B is picked, carried to the pre-assembly pose (retracted along ``-v_a``)
 and inserted along ``v_a`` in a straight line; only then is it released.
+A symmetric B (a square peg turned by 90 deg about its axis is the same
+solid in the same place) has as many assembled poses as its symmetry group
+(:func:`asmteach.core.symmetry.part_symmetries`, at most ``goal_symmetries``):
+each is a goal slot, and a grasp of B need only be feasible at one of them.
 While A moves, B is an obstacle where it lies; while B moves, A is one at its
 goal.
 
@@ -31,11 +35,13 @@ from asmteach.core.interfaces import (
     AssemblyResult,
     MotionPlanner,
     Obstacle,
+    PartModel,
     Robot,
 )
 from asmteach.core.models import Plan
 from asmteach.core.rests.placements import compute_placements
 from asmteach.core.robot import PlanningScene
+from asmteach.core.symmetry import part_symmetries
 from asmteach.plugins.planners.regrasp.assembly import TransferResult, feasible_grasps_at, plan_transfer
 from asmteach.plugins.planners.regrasp.goals import AssemblyGoal, assembly_goal_at, ranked_assembly_goals
 from asmteach.plugins.planners.regrasp.graph import PoseSlot
@@ -52,6 +58,28 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
 
     Settings = AssemblySettings
     settings: AssemblySettings
+    _symmetries: dict[str, list[np.ndarray]] | None = None
+
+    def _equivalents(self, part: PartModel) -> list[np.ndarray]:
+        """Up to ``goal_symmetries`` of ``part``'s symmetry transforms (part frame), the identity first, spread
+        evenly over its group; computed once per part."""
+        if self._symmetries is None:
+            self._symmetries = {}
+        key = part.source_hash or part.name
+        if key not in self._symmetries:
+            group = part_symmetries(part.mesh, np.asarray(part.center_of_mass, float))
+            step = -(-len(group) // self.settings.goal_symmetries)  # ceil: every step-th, the identity first
+            self._symmetries[key] = group[::step][: self.settings.goal_symmetries]
+        return self._symmetries[key]
+
+    def _goal_slots(self, part: PartModel, T_world_part: np.ndarray) -> tuple[PoseSlot, tuple[PoseSlot, ...]]:
+        """B's assembled pose as the goal slot ``assembled``, and its symmetric equivalents ``assembled_sym{k}``."""
+        T = np.asarray(T_world_part, float)
+        slots = [
+            PoseSlot("assembled" if k == 0 else f"assembled_sym{k}", "goal", T @ S)
+            for k, S in enumerate(self._equivalents(part))
+        ]
+        return slots[0], tuple(slots[1:])
 
     def plan(
         self,
@@ -141,17 +169,22 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
             return goals[0], -1
         best: tuple[AssemblyGoal, int] | None = None
         for goal in goals:
-            n = len(
-                feasible_grasps_at(
-                    robot,
-                    scene,
-                    b,
-                    problem.grasps_b,
-                    goal.T_world_b,
-                    [table, Obstacle(a.name, a.mesh, goal.T_world_a)],
-                    s,
+            n = 0
+            first, others = self._goal_slots(b, goal.T_world_b)
+            for slot in (first, *others):  # the equivalents only while too few are feasible
+                n += len(
+                    feasible_grasps_at(
+                        robot,
+                        scene,
+                        b,
+                        problem.grasps_b,
+                        slot.T_world_part,
+                        [table, Obstacle(a.name, a.mesh, goal.T_world_a)],
+                        s,
+                    )
                 )
-            )
+                if n >= s.min_goal_grasps:
+                    break
             if best is None or n > best[1]:
                 best = (goal, n)
             if n >= s.min_goal_grasps:
@@ -221,6 +254,7 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         world_b = [table_obstacle(scene, h), Obstacle(a.name, a.mesh, goal.T_world_a)]
         start_b = problem.T_world_b[:3, 3]
         back = goal.T_world_b_pre[:3, 3] - goal.T_world_b[:3, 3]  # the retraction, along -v_world
+        assembled, equivalents = self._goal_slots(b, goal.T_world_b)
         return plan_transfer(
             robot,
             scene,
@@ -228,9 +262,7 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
             b,
             problem.grasps_b,
             T_start=problem.T_world_b,
-            goal=PlaceGoal(
-                PoseSlot("assembled", "goal", goal.T_world_b), back, touch=(a.name, "table"), on_table=False
-            ),
+            goal=PlaceGoal(assembled, back, touch=(a.name, "table"), on_table=False, alternatives=equivalents),
             middle_slots=lambda every: placement_slots(
                 compute_placements(b),
                 start_b[:2],

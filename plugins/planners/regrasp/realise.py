@@ -49,6 +49,14 @@ class PlaceGoal:
     """Obstacles the held part may touch on the final move (intended contact)."""
     on_table: bool = True
     """True when the part rests on the table at the goal (grasps then must come from above)."""
+    alternatives: tuple[PoseSlot, ...] = ()
+    """Other goal slots as good as :attr:`slot`: a symmetric part's equivalent poses (the same solid in the same
+    place, each a goal layer of its own, so a grasp need only be feasible at one of them)."""
+
+    @property
+    def slots(self) -> tuple[PoseSlot, ...]:
+        """Every goal slot, :attr:`slot` first."""
+        return (self.slot, *self.alternatives)
 
 
 @dataclass
@@ -183,7 +191,7 @@ def realise_keyframes(
             into = START if i == 0 else nodes[i - 1]
             arm, vid = pick[2], pick[1]
             slot_pick, slot_place = G.nodes[pick]["slot"], G.nodes[place]["slot"]
-            final = place[0] == goal.slot.name and j == len(nodes) - 1
+            final = place[0] in {g.name for g in goal.slots} and j == len(nodes) - 1
 
             # 0. the other arms go home (the grasp graph was screened with them there) and stay put
             hold(arm, None)

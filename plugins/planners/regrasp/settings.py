@@ -33,6 +33,14 @@ class AssemblySettings(StrictModel):
         "least this many grasps of B are feasible (IK, collision) when assembled; if none, the one with the most "
         "(0: always the most vertical, unchecked)",
     )
+    goal_symmetries: int = Field(
+        8,
+        ge=1,
+        le=64,
+        description="B's assembled pose and up to this many minus one of its symmetric equivalents (B's symmetry "
+        "group: the same solid in the same place) are goals; each is a goal layer of the regrasp graph, so a grasp "
+        "need only be feasible at one (1: the taught pose alone)",
+    )
     placement_yaws: int = Field(4, ge=1, le=24, description="evenly sampled yaws per stable placement")
     max_placements: int = Field(4, ge=0, le=32, description="most probable placements used as middle layers")
     max_candidates: int = Field(40, ge=1, le=500, description="grasps solved by IK per slot after screening")

@@ -281,3 +281,58 @@ def test_the_assembly_planner_returns_the_failed_transfers_cause() -> None:
     result = planner._fail(AssemblyResult(False, Plan()), failed, "part A (peg)", 0.0, EdgeOfReachArm())
     assert not result.success and result.cause is FailureCause.NO_GRASP
     assert result.reason == "part A (peg): no grasp is feasible at the goal pose"
+
+
+# ---------------------------------------------------------------- symmetric goals
+
+
+def test_an_upside_down_goal_of_a_symmetric_peg_is_reached_through_its_equivalent(peg) -> None:
+    """The goal no grasp reaches (above), with the peg's 180 deg turn about x as an equivalent goal slot: the
+    same solid in the same place, upright, so the top-end grasp puts it there."""
+    from asmteach.plugins.planners.regrasp.planner import RegraspAssemblyPlanner
+
+    flipped = geometry.from_rotation(Rotation.from_euler("x", np.pi).as_matrix() @ LYING, [*GOAL_XY, 0.3])
+    planner = RegraspAssemblyPlanner({"goal_symmetries": 8}, seed=0)
+    first, others = planner._goal_slots(peg, flipped)
+    assert first.name == "assembled" and len(others) == 7  # a square bar: 4 turns about its axis x 2 ends
+    for slot in others:  # every one the same solid in the same place
+        np.testing.assert_allclose(
+            np.sort(transform(slot.T_world_part, peg), axis=0), np.sort(transform(flipped, peg), axis=0), atol=1e-6
+        )
+    assert len(RegraspAssemblyPlanner({"goal_symmetries": 1}, seed=0)._goal_slots(peg, flipped)[1]) == 0
+    T_start = geometry.from_rotation(LYING, [*START_XY, 0.01])
+    robot = EdgeOfReachArm()
+    res = plan_transfer(
+        robot,
+        robot.scene,
+        StraightLine(),
+        peg,
+        GRASPS,
+        T_start=T_start,
+        goal=PlaceGoal(first, np.array([0.0, 0.0, 0.05]), on_table=False, alternatives=others),
+        middle_slots=lambda every: placement_slots(
+            compute_placements(peg), T_start[:2, 3], 0.0, AssemblySettings(), every=every
+        ),
+        world=[],
+        q_now={"left": robot.home("left")},
+        settings=AssemblySettings(),
+    )
+    assert res.success, res.reason
+    assert res.stats["feasible"]["goal_slots"] == 8 and res.stats["feasible"]["goal"] > 0
+    end = res.search.nodes[-1]
+    assert end[0].startswith("assembled_sym")  # the taught pose itself has no feasible grasp
+    assert [s.label for s in res.steps if s.label.startswith("insert")] == [f"insert peg at {end[0]}"]
+
+
+def transform(T: np.ndarray, part: PartModel) -> np.ndarray:
+    """The part's vertices at pose ``T`` (world, metres)."""
+    return geometry.transform_points(T, part.mesh.vertices)
+
+
+def test_no_grasp_at_any_goal_slot_is_a_missing_grasp() -> None:
+    goals = [GraspFeasibility(PoseSlot(f"g{k}", "goal", np.eye(4)), {}) for k in range(3)]
+    start = GraspFeasibility(PoseSlot("start", "start", np.eye(4)), {(1, "left"): np.zeros(6)})
+    cut = KeyframeSearch(False, cut="goal")
+    assert _search_cause(cut, [start, *goals], 4) is FailureCause.NO_GRASP
+    goals[2].solutions[(1, "left")] = np.zeros(6)
+    assert _search_cause(cut, [start, *goals], 4) is FailureCause.MOTION
