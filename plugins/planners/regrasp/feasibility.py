@@ -13,6 +13,12 @@ world (python-fcl), the approach must come from above for a part resting on
 the table, and the TCP must lie within the arm's reach. Grasps feasible at
 other slots are tried first so that layers share grasps (transfer edges).
 
+At a goal slot the part arrives held and is let go there, so the hand is
+also checked closed on it (each finger's inner face half the grasp width
+from the TCP, as the robot's fingers are on an insertion): a finger beside a
+short pin's insertion end clears the face around the hole with the jaw
+pre-shaped 2 mm wider a side, and meets it closed.
+
 A parallel jaw is symmetric: IK may succeed only for the TCP turned 180 deg
 about its approach axis. Such a solution is a different *grasp variant*;
 variant ``2 * grasp.id + flipped`` names it in the graph so that transfer
@@ -93,9 +99,14 @@ def screen_slot(
     settings: ScreenSettings,
     on_table: bool = True,
 ) -> tuple[list[Grasp], dict[int, Rejection]]:
-    """Grasps passing the cheap tests at ``slot``, and why the others fail (keyed by grasp id)."""
+    """Grasps passing the cheap tests at ``slot``, and why the others fail (keyed by grasp id).
+
+    At a goal slot (``slot.layer == "goal"``) the hand is also checked closed at the grasp width
+    (module docstring); a rejection for that says ``closed`` in its detail.
+    """
     passed: list[Grasp] = []
     rejected: dict[int, Rejection] = {}
+    closed_check = slot.layer == "goal"
     for g in grasps:
         T = slot.T_world_part @ g.T_part_tcp
         if on_table and -T[2, 2] < settings.min_down:
@@ -103,8 +114,13 @@ def screen_slot(
             continue
         opening = min(g.width + 2.0 * settings.finger_clearance, hand.max_width)
         hit = collider.first_contact(hand_boxes(hand, opening, sweep=settings.pregrasp_distance), T)
+        closed = ""
+        if hit is None and closed_check:
+            hit, closed = collider.first_contact(hand_boxes(hand, min(g.width, hand.max_width)), T), " closed"
         if hit is not None:
-            rejected[g.id] = Rejection(Rejected.HAND_COLLISION, f"hand/{hit[0]} with {hit[1]}", hit[1] == "table")
+            rejected[g.id] = Rejection(
+                Rejected.HAND_COLLISION, f"hand/{hit[0]}{closed} with {hit[1]}", hit[1] == "table"
+            )
             continue
         passed.append(g)
     return passed, rejected
