@@ -40,7 +40,15 @@ Pipeline (paper, "Rough detection using point cloud"), all in the world frame
    ``distinct_deg``) scores within ``ambiguity_margin`` and the ray evidence
    does not rule it out, the view cannot tell them apart: ``found: false``
    with the reason ("ambiguous: ...") and the poses in ``details["ambiguous"]``
-   (``details["ambiguous_kind"] = "near_twin"``).
+   (``details["ambiguous_kind"] = "near_twin"``);
+7. the winner's rotation uncertainty is estimated from the seen points (linearised point-to-plane
+   registration with the Kinect's noise, turns about an axis of revolution left out:
+   :func:`~asmteach.plugins.detectors.cvfh.pose_search.rotation_sigma_deg`); when ``pin_sigmas`` times it
+   exceeds ``distinct_deg``, the view does not pin the pose down to the tolerance and it is not reported
+   (``details["rotation_sigma_deg"]``).
+
+Thin parts (thinner than ``thin_height``) also keep their points below the table-removal height where their
+patch stands clearly above the table (:mod:`~asmteach.plugins.detectors.cvfh.thin`).
 
 Nothing verified means ``found: false`` with the reason of the closest miss;
 a wrong pose is never reported as found.
@@ -65,9 +73,11 @@ from asmteach.core.symmetry import part_symmetries
 from asmteach.plugins.detectors.cvfh.pose_search import (
     ClusterJob,
     Prepared,
+    free_axes,
     hull_twin_pass,
     near_twin_pass,
     poses_apart,
+    rotation_sigma_deg,
     verify_rounds,
     view_hypotheses,
 )
@@ -127,8 +137,20 @@ class CvfhIcpDetector(Detector):
                     near.append(geometry.from_rotation(R, com - R @ com))
         samples = SampleIndex.of(model, self.seed)
         thin = float(part.mesh.bounding_box_oriented.primitive.extents.min()) < s.thin_height
+        free = free_axes(part.mesh, com, s.pin_same) if s.pin_sigmas > 0 else np.zeros((0, 3))
         prep = Prepared(
-            model, db, diameter, built, 1000.0 * (time.perf_counter() - t0), rests, twins, near, own, samples, thin
+            model,
+            db,
+            diameter,
+            built,
+            1000.0 * (time.perf_counter() - t0),
+            rests,
+            twins,
+            near,
+            own,
+            samples,
+            thin,
+            free,
         )
         self._prepared[key] = prep
         return prep
@@ -320,6 +342,16 @@ class CvfhIcpDetector(Detector):
                     {"T_world_part": v.T_world_part.tolist(), "score": round(v.score, 4)} for v in (best, rival)
                 ]
                 info["ambiguous_kind"] = "near_twin"
+                return _Outcome(None, replace(best, accepted=False, why=why), info, job.icp_passes)
+        if best is not None and s.pin_sigmas > 0:
+            sigma = rotation_sigma_deg(best.T_world_part, job, prep, s.refine.inlier_distance)
+            info["rotation_sigma_deg"] = round(sigma, 3)
+            if s.pin_sigmas * sigma > s.distinct_deg:
+                # The seen points leave the pose free to turn by the tolerance: reporting it would be a guess.
+                why = (
+                    f"the view does not pin the pose down: its rotation is uncertain by {sigma:.1f} deg (one "
+                    f"sigma), {s.pin_sigmas:.0f} sigma > {s.distinct_deg:.0f} deg"
+                )
                 return _Outcome(None, replace(best, accepted=False, why=why), info, job.icp_passes)
         info = {**info, "hypotheses": len(hyps), "cluster_points": len(cluster)}
         return _Outcome(best, closest, info, job.icp_passes)

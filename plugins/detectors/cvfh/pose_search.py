@@ -9,7 +9,9 @@ in order:
   ``icp_candidates`` until one verifies;
 * :func:`hull_twin_pass`: the verified pose turned by each hull twin, the ray evidence choosing;
 * :func:`near_twin_pass`: the pose turned by each near twin and nudge, and the distinct rival that
-  scores as well, if any (the view cannot tell them apart).
+  scores as well, if any (the view cannot tell them apart);
+* :func:`rotation_sigma_deg`: how well the seen points pin the winner's rotation down (turns about an axis
+  of revolution, :func:`free_axes`, left out).
 """
 
 from __future__ import annotations
@@ -17,10 +19,20 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import trimesh
 
+from asmteach.core import geometry
+from asmteach.core.clouds import depth_sigma
 from asmteach.core.models import TablePlane
-from asmteach.core.perception.registration import ModelCloud, RefineSettings, Verdict, icp_refine, verify
+from asmteach.core.perception.registration import (
+    ModelCloud,
+    RefineSettings,
+    Verdict,
+    icp_refine,
+    verify,
+)
 from asmteach.core.perception.viewpoint import StageClock
+from asmteach.core.symmetry import SymmetryFinder, axis_rotations, principal_frame
 from asmteach.plugins.detectors.cvfh.prescore import SampleIndex, near_shares, support_gap
 from asmteach.plugins.detectors.cvfh.resting import disagreement
 from asmteach.plugins.detectors.cvfh.settings import CvfhSettings
@@ -29,10 +41,12 @@ from asmteach.plugins.detectors.cvfh.views import CloudDescription, ViewDatabase
 __all__ = [
     "ClusterJob",
     "Prepared",
+    "free_axes",
     "hull_twin_pass",
     "is_distinct",
     "near_twin_pass",
     "poses_apart",
+    "rotation_sigma_deg",
     "verify_rounds",
     "view_hypotheses",
 ]
@@ -59,6 +73,8 @@ class Prepared:
     """The model's surface samples indexed for the pre-score's distance tests."""
     thin: bool = False
     """The part is thin enough to lie mostly below the table-removal height (``thin_height``)."""
+    free: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    """(m, 3) part-frame axes of revolution (see :func:`free_axes`)."""
 
 
 @dataclass
@@ -183,6 +199,8 @@ def hull_twin_pass(
             continue
         verified += 1
         job.judged += [T, best.T_world_part]
+        if not is_distinct(T, [best.T_world_part], prep.own, s):
+            continue  # ICP brought the twin back onto the pose (or a symmetric equivalent): nothing to choose
         ev = disagreement(best.T_world_part, T, job.cluster, job.eye, prep.model, s.twin_fit, s.twin_off)
         verdict = ev.verdict(s.twin_min_points, s.twin_ratio)
         if verdict == "b" or (verdict == "ambiguous" and v.score > best.score):
@@ -271,3 +289,63 @@ def is_distinct(
         if mm <= scale * s.distinct_mm and deg <= scale * s.distinct_deg:
             return False
     return True
+
+
+def free_axes(mesh: trimesh.Trimesh, com: np.ndarray, tol: float) -> np.ndarray:
+    """``(m, 3)`` principal axes (part frame, unit) the part turns about freely: an axis of revolution (turns of
+    7 and 31 deg map its surface onto itself within ``tol`` metres, as :func:`asmteach.core.symmetry.
+    equivalent_transforms` tests it). A turn about one gives the same pose, so the view need not pin it."""
+    com = np.asarray(com, float)
+    finder = SymmetryFinder(mesh, np.asarray(mesh.convex_hull.vertices), com, tol=tol, corners=False)
+    axes = [a for a in principal_frame(mesh).T if all(finder.maps(R) for R in axis_rotations(a, np.radians([7, 31])))]
+    return np.asarray(axes, float).reshape(-1, 3)
+
+
+def rotation_sigma_deg(T_world_part: np.ndarray, job: ClusterJob, prep: Prepared, inlier: float) -> float:
+    """The largest standard deviation (deg) of the pose's rotation the seen points leave, any direction.
+
+    Linearised point-to-plane registration: each cluster point within ``inlier`` metres of the model at
+    the pose constrains the motion along the model's normal at its nearest model point; its noise along
+    that normal is the Kinect's depth noise along the camera ray (:func:`asmteach.core.clouds.depth_sigma`)
+    and a 0.5-pixel lateral jitter across it. The information matrix of the 6 pose parameters (turn about
+    the seen centroid, shift) gives the covariance; the turn block's largest eigenvalue, with the
+    translation free (a shift may make up for part of a turn) and turns about an axis of revolution left
+    out (:func:`free_axes`), is the weakest direction's variance.
+    """
+    cluster, eye = job.cluster, np.asarray(job.eye, float)
+    T_pw = geometry.invert(T_world_part)
+    local = geometry.transform_points(T_pw, cluster)
+    import open3d as o3d
+
+    near = prep.model.scene.compute_closest_points(o3d.core.Tensor(local.astype(np.float32)))
+    q_local = near["points"].numpy().astype(float)
+    ok = np.linalg.norm(q_local - local, axis=1) < inlier
+    if ok.sum() < 10:
+        return float("inf")
+    R = T_world_part[:3, :3]
+    q = geometry.transform_points(T_world_part, q_local[ok])
+    n = near["primitive_normals"].numpy().astype(float)[ok] @ R.T
+    p = cluster[ok]
+    ray = p - eye
+    rng = np.linalg.norm(ray, axis=1)
+    cos = np.abs(np.einsum("ij,ij->i", n, ray / rng[:, None]))
+    lateral = rng * 0.5 / 525.0  # 0.5 px of a Kinect v1's 525 px focal length, metres
+    var = (depth_sigma(rng) * cos) ** 2 + lateral**2 * (1.0 - cos**2)
+    c = p.mean(axis=0)
+    J = np.hstack([np.cross(q - c, n), n])  # d(residual) / d(turn, shift)
+    free = prep.free @ R.T if len(prep.free) else np.zeros((0, 3))
+    # turns orthogonal to the free axes: an orthonormal basis of their complement
+    basis = np.linalg.svd(np.eye(3) - free.T @ free)[0][:, : 3 - len(free)] if len(free) else np.eye(3)
+    if basis.shape[1] == 0:
+        return 0.0
+    Jr = np.hstack([J[:, :3] @ basis, J[:, 3:]])
+    info = (Jr / var[:, None]).T @ Jr
+    k = basis.shape[1]
+    # The turn's information with the shift free: the Schur complement of the shift block (its pseudo-inverse: a
+    # shift nothing pins, a tube seen from the side along its axis, leaves the turns alone).
+    schur = info[:k, :k] - info[:k, k:] @ np.linalg.pinv(info[k:, k:]) @ info[k:, :k]
+    weakest = float(np.linalg.eigvalsh(schur).min())
+    if weakest <= 0.0:
+        return float("inf")
+    worst = 1.0 / weakest
+    return float(np.degrees(np.sqrt(max(worst, 0.0))))

@@ -103,3 +103,16 @@ class CvfhSettings(StrictModel):
         description="thin parts: a patch is raised when its mean height exceeds the table's by this many spreads "
         "of the patch means (measured on the frame)",
     )
+    pin_sigmas: float = Field(
+        3.0,
+        ge=0.0,
+        description="the found pose's rotation uncertainty (one sigma in its weakest direction, from the seen "
+        "points and the Kinect's noise) times this must stay within distinct_deg, else the view does not pin "
+        "the pose down and it is not reported (0: no check)",
+    )
+    pin_same: float = Field(
+        0.0005,
+        gt=0.0,
+        description="a turn mapping the part's surface onto itself within this (metres) is a symmetry, not "
+        "checked by pin_sigmas (the tolerance of asmteach.core.symmetry.equivalent_transforms)",
+    )
