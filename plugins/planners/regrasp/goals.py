@@ -17,6 +17,11 @@ off the hole's axis where it enters (0.87 deg of teaching noise: 0.38 mm at a
 normal is within a degree or two of the insertion, but not along it, is not a
 design anyone makes.
 
+B must also stay where it is let go: a slider in a through slot stood on
+end slides down out of it, and a peg in a blind hole deeper than its
+insertion drops to the bottom. :func:`slides_out` tells such placements
+of A; :func:`ranked_assembly_goals` ranks those where B is held first.
+
 Frames: ``T_world_*`` 4x4, metres; ``v_a`` is a unit vector in A's frame
 (the direction B moves *into* the assembly).
 """
@@ -24,9 +29,11 @@ Frames: ``T_world_*`` 4x4, metres; ``v_a`` is a unit vector in A's frame
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+import trimesh
+import trimesh.collision
 
 from asmteach.core.errors import UserError
 from asmteach.core.geometry import compose, from_rotation, rot_z, transform_points
@@ -41,6 +48,7 @@ __all__ = [
     "choose_assembly_goal",
     "clear_retraction",
     "ranked_assembly_goals",
+    "slides_out",
 ]
 
 VERTICAL_SNAP = float(np.radians(2.0))
@@ -59,6 +67,8 @@ class AssemblyGoal:
     """Insertion direction in the world (unit)."""
     placement_id: int
     """Stable placement of A used at the goal."""
+    held: bool = True
+    """B stays in A under gravity once let go (:func:`slides_out` is False)."""
 
 
 def ranked_assembly_goals(
@@ -74,7 +84,8 @@ def ranked_assembly_goals(
     vertical_snap: float = VERTICAL_SNAP,
 ) -> list[AssemblyGoal]:
     """A's goal at each of its placements at ``xy`` (metres) turned by ``yaw`` (radians) about the table normal,
-    best first: insertion most nearly straight down, then the likelier placement.
+    best first: B held in A under gravity (:func:`slides_out`), then insertion most nearly straight down, then
+    the likelier placement.
 
     ``v_world`` is ``R_world_A @ v_a``, or exactly ``(0, 0, -1)`` when that is
     within ``vertical_snap`` radians of it (0 turns the snap off). Placements
@@ -92,7 +103,9 @@ def ranked_assembly_goals(
         low_b = min(_lowest(part_b, goal.T_world_b), _lowest(part_b, goal.T_world_b_pre))
         if low_b < table_height - 1e-4:
             continue
-        ranked.append((float(-goal.v_world[2]) + 0.05 * p.probability, goal))
+        held = not slides_out(part_a, part_b, goal.T_world_a, goal.T_world_b, goal.v_world, table_height)
+        goal = replace(goal, held=held)
+        ranked.append((2.0 * held + float(-goal.v_world[2]) + 0.05 * p.probability, goal))
     if not ranked:
         raise UserError(
             f"no stable placement of {part_a.name} keeps {part_b.name} above the table when assembled; "
@@ -172,6 +185,52 @@ def clear_retraction(
     a = transform_points(T_world_a, part_a.mesh.vertices) @ back
     b = transform_points(T_world_b, part_b.mesh.vertices) @ back
     return float(a.max() - b.min()) + CLEAR_MARGIN
+
+
+SLIDE_PROBE = 0.002
+"""Metres B is moved along a downhill free direction to tell whether it slides: the success tolerance."""
+
+SLIDE_SLOPE = float(np.radians(10.0))
+"""Radians below horizontal from which B is taken to slide along a free direction (friction holds it on
+gentler slopes: 10 deg is well inside the 16.7 deg friction cone of mu = 0.3)."""
+
+
+def slides_out(
+    part_a: PartModel,
+    part_b: PartModel,
+    T_world_a: np.ndarray,
+    T_world_b: np.ndarray,
+    v_world: np.ndarray,
+    table_height: float,
+    *,
+    probe: float = SLIDE_PROBE,
+    slope: float = SLIDE_SLOPE,
+) -> bool:
+    """True when B, let go at ``T_world_b`` in A at ``T_world_a`` (metres), can slide away under gravity.
+
+    B falls if nothing is under it, and slides along its insertion line (``v_world``, unit: on into A, or
+    back out), where A leaves it free: straight down and each of the two directions along the line that
+    points more than ``slope`` radians below horizontal are tried; B moved ``probe`` metres along one
+    without meeting A or the table (python-fcl) is not held. A peg whose head rests on A, or whose tip
+    rests on a hole's bottom or the table, is held; a slider in a through slot stood on end, a peg in a
+    blind hole deeper than its insertion, or a B taught floating above its seat, is not.
+    """
+    v = np.asarray(v_world, float) / np.linalg.norm(v_world)
+    downhill = [np.array([0.0, 0.0, -1.0])] + [d for d in (v, -v) if d[2] < -np.sin(slope)]
+    lo = transform_points(T_world_a, part_a.mesh.vertices).min(axis=0)
+    hi = transform_points(T_world_a, part_a.mesh.vertices).max(axis=0)
+    T_table = from_rotation(np.eye(3), [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), table_height - 0.05])
+    slab = trimesh.creation.box(extents=[1.0, 1.0, 0.1])  # under A and well beyond: B's table
+    # Triangle intersection (fcl's mesh-mesh distance is unreliable between non-convex meshes in contact).
+    world = trimesh.collision.CollisionManager()
+    world.add_object("A", part_a.mesh, np.asarray(T_world_a, float))
+    world.add_object("table", slab, T_table)
+    for d in downhill:
+        T = np.asarray(T_world_b, float).copy()
+        T[:3, 3] += probe * d
+        if not world.in_collision_single(part_b.mesh, T):
+            return True
+    return False
 
 
 def _lowest(part: PartModel, T_world_part: np.ndarray) -> float:

@@ -2,8 +2,8 @@
 
 Part A is picked at its start pose, regrasped through intermediate stable
 placements if needed, and put down at its goal placement: of A's placements
-ranked by :mod:`asmteach.plugins.planners.regrasp.goals` (B going in from
-above first), the first at which at least ``min_goal_grasps`` of B's grasps
+ranked by :mod:`asmteach.plugins.planners.regrasp.goals` (B held in A
+under gravity first, then B going in from above), the first at which at least ``min_goal_grasps`` of B's grasps
 are feasible when B is assembled (a slider whose only exposed part, standing
 up, is a rib beside A's face is easier to hold when A lies flat and B slides
 in sideways).
@@ -101,6 +101,7 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
             "goal_placement_a": goal.placement_id,
             "v_world": goal.v_world.tolist(),
             "goal_grasps_b": goal_grasps,
+            "goal_holds_b": goal.held,  # False: B would slide out of A there (no goal holding it has grasps)
         }
         result = AssemblyResult(
             False, Plan(), T_world_a_goal=goal.T_world_a, T_world_b_goal=goal.T_world_b, details=details

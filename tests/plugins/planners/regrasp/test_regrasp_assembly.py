@@ -247,20 +247,22 @@ def test_plan_insertion_aims_b_at_an_a_seen_off_its_goal(peg_in_hole_plan) -> No
 
 
 def test_goals_are_ranked_by_how_vertical_they_make_the_insertion() -> None:
-    """The T-slot's slider goes in along A's -x: A standing on its end makes that straight down, and comes first;
-    lying flat (A's likeliest placement) makes it horizontal."""
+    """The T-slot's slider goes in along A's -x: A standing on its end makes that straight down, but the slot
+    goes through and the slider would drop out of it, so that goal comes last; of those holding the slider,
+    the most vertical come first, and lying flat (A's likeliest placement) makes the insertion horizontal."""
     from asmteach.plugins.planners.regrasp.goals import ranked_assembly_goals
 
     task = load_structure("configs/parts/set1/t_slot.yaml")
     a, b = build_part(task.part_a), build_part(task.part_b)
     placements = compute_placements(a)
     goals = ranked_assembly_goals(a, b, task, placements, xy=(0.4, 0.0), yaw=0.0, table_height=0.0, retract=0.05)
-    down = [float(-g.v_world[2]) for g in goals]
-    assert down == sorted(down, reverse=True)
-    np.testing.assert_array_equal(goals[0].v_world, [0.0, 0.0, -1.0])
+    held = [g for g in goals if g.held]
+    down = [float(-g.v_world[2]) for g in held]
+    assert down == sorted(down, reverse=True) and goals[: len(held)] == held
+    assert [g.held for g in goals[len(held) :]] == [False] and goals[-1].v_world[2] == -1.0  # on its end
     likeliest = max(placements, key=lambda p: p.probability).id
     flat = next(g for g in goals if g.placement_id == likeliest)
-    assert abs(flat.v_world[2]) < 1e-9
+    assert abs(flat.v_world[2]) < 1e-9 and flat.held
     first = choose_assembly_goal(a, b, task, placements, xy=(0.4, 0.0), yaw=0.0, table_height=0.0, retract=0.05)
     assert first.placement_id == goals[0].placement_id
 
@@ -274,9 +276,9 @@ def test_a_slider_whose_upright_goal_leaves_one_grasp_is_assembled_with_a_lying_
     with random_scene("configs/parts/set1/t_slot.yaml", 0) as (robot, problem):
         task = problem.task
         motion = registry.create("motion_planners", "trrt", {}, seed=0)
-        upright = registry.create("assembly_planners", "regrasp", {"min_goal_grasps": 0}, seed=0)
-        chosen = upright._choose_goal(problem, robot, robot.scene, table_obstacle(robot.scene, 0.0), None)[0]
-        np.testing.assert_array_equal(chosen.v_world, [0.0, 0.0, -1.0])  # unchecked: the most vertical
+        unchecked = registry.create("assembly_planners", "regrasp", {"min_goal_grasps": 0}, seed=0)
+        chosen = unchecked._choose_goal(problem, robot, robot.scene, table_obstacle(robot.scene, 0.0), None)[0]
+        assert chosen.held  # unchecked: the first ranked, the slider held (on its end it drops out of the slot)
         messages: list[str] = []
         res = registry.create("assembly_planners", "regrasp", {}, seed=0).plan(
             problem, robot, motion, progress=messages.append
