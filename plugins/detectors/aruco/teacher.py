@@ -32,6 +32,7 @@ from asmteach.core.interfaces import Teacher
 from asmteach.core.models import AssemblyTask, CameraIntrinsics, StrictModel, TeachingEvidence
 from asmteach.core.parts import build_part
 from asmteach.plugins.detectors.aruco.approach import refit_with_rotation
+from asmteach.plugins.detectors.aruco.branches import follow_branch
 from asmteach.plugins.detectors.aruco.detect import MarkerDetector, RefineMethod
 from asmteach.plugins.detectors.aruco.fusion import fuse_poses
 from asmteach.plugins.detectors.aruco.insertion import (
@@ -160,17 +161,22 @@ class ArucoTeacher(Teacher):
                 )
                 if poses[role] is not None:
                     prior[role] = poses[role].T_cam_part
-            fr = FrameResult(i, poses["A"], poses["B"], obs["A"], obs["B"])
+            results.append(FrameResult(i, poses["A"], poses["B"], obs["A"], obs["B"]))
+        for role in ("A", "B"):
+            follow_branch([r.pose_a if role == "A" else r.pose_b for r in results])
+        for fr in results:
             if fr.pose_a is not None and fr.pose_b is not None:
                 fr.T_A_B = geometry.invert(fr.pose_a.T_cam_part) @ fr.pose_b.T_cam_part
-            results.append(fr)
         return results
 
     # ------------------------------------------------------------ over frames
     def teach(self, frames: Sequence[np.ndarray], camera: CameraIntrinsics, task: AssemblyTask) -> AssemblyTask:
         """Estimate ``T_A_B``, ``v_a`` and the evidence (see the module docstring)."""
+        return self.teach_observed(self.observe(frames, camera, task), camera, task)
+
+    def teach_observed(self, results: list[FrameResult], camera: CameraIntrinsics, task: AssemblyTask) -> AssemblyTask:
+        """:meth:`teach` from frames already observed (:meth:`observe`); flips it resolves are written back."""
         s = self.settings
-        results = self.observe(frames, camera, task)
         notes: list[str] = []
         for role, part in (("A", task.part_a), ("B", task.part_b)):
             if not any((r.obs_a if role == "A" else r.obs_b) for r in results):
