@@ -10,6 +10,7 @@ are the roll, pitch, yaw (degrees) of the relative-rotation error
 
 from __future__ import annotations
 
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -24,8 +25,15 @@ from asmteach.core.errors import UserError
 from asmteach.core.io import atomic_path, write_text
 from asmteach.core.models import StrictModel
 from asmteach.core.parts import build_part, load_structure
+from asmteach.core.structure_corpus import STRUCTURE_FAMILIES
 from asmteach.core.sweep import Experiment, flatten, to_csv
 from asmteach.plugins.detectors.aruco.camera import c615_like, load_camera
+from asmteach.plugins.detectors.aruco.marker_count import (
+    generated_task,
+    keep_markers,
+    precision_bound,
+    write_marker_count_report,
+)
 from asmteach.plugins.detectors.aruco.scene import DemoSettings, render_demo_frames
 from asmteach.plugins.detectors.aruco.teacher import ArucoTeacher
 
@@ -35,7 +43,9 @@ __all__ = ["TeachingBreakdown", "TeachingPrecision", "run_teaching_trial"]
 class TeachingParams(StrictModel):
     """One teaching trial."""
 
-    structure: str = Field(description="structure YAML, relative to the experiment file")
+    structure: str | None = Field(None, description="structure YAML, relative to the experiment file")
+    generated: str | None = Field(None, description="instead: 'family:index' of the generated corpus (seed 0)")
+    markers_per_part: int | None = Field(None, ge=1, le=4, description="keep at most this many markers per part")
     camera: str | None = Field(None, description="camera YAML; default: C615-like")
     demo: dict[str, Any] = Field(default_factory=dict, description="DemoSettings overrides (orientation, ...)")
     teacher: dict[str, Any] = Field(default_factory=dict, description="aruco teacher settings")
@@ -45,9 +55,22 @@ class TeachingParams(StrictModel):
 
 def run_teaching_trial(exp_dir: Path, params: TeachingParams, seed: int, workdir: Path | None) -> dict[str, Any]:
     """Render, teach, compare; return the metrics of one trial."""
+    with tempfile.TemporaryDirectory() as tmp:
+        return _trial(exp_dir, params, seed, workdir, Path(tmp))
+
+
+def _trial(exp_dir: Path, params: TeachingParams, seed: int, workdir: Path | None, tmp: Path) -> dict[str, Any]:
     from asmteach.core.models import resolve_relative
 
-    task = load_structure(resolve_relative(params.structure, exp_dir))
+    if (params.structure is None) == (params.generated is None):
+        raise UserError("params: give either structure or generated")
+    if params.generated is not None:
+        task = generated_task(params.generated, tmp)
+    else:
+        assert params.structure is not None
+        task = load_structure(resolve_relative(params.structure, exp_dir))
+    if params.markers_per_part is not None:
+        task = keep_markers(task, params.markers_per_part)
     demo = dict(params.demo)
     scale = params.marker_scale
     if params.vary != "baseline":
@@ -63,14 +86,17 @@ def run_teaching_trial(exp_dir: Path, params: TeachingParams, seed: int, workdir
     settings = DemoSettings.model_validate(demo)
     camera = load_camera(resolve_relative(params.camera, exp_dir)) if params.camera else c615_like()
     a, b = build_part(task.part_a), build_part(task.part_b)
-    frames = []
+    frames, truth = [], []
     for fr, img, _ in render_demo_frames(a, b, task, camera, settings, seed=seed):
         frames.append(img)
+        truth.append(fr)
         if workdir is not None and fr.phase == "assembled" and len(frames) == settings.approach_frames + 1:
             with atomic_path(workdir / "first_assembled.jpg") as tmp:
                 cv2.imwrite(str(tmp), img)
     t0 = time.perf_counter()
-    learned = ArucoTeacher(params.teacher, seed=seed).teach(frames, camera, task)
+    teacher = ArucoTeacher(params.teacher, seed=seed)
+    observed = teacher.observe(frames, camera, task)
+    learned = teacher.teach_observed(observed, camera, task)
     seconds = time.perf_counter() - t0
     T_true, T_est = task.T_A_B, learned.T_A_B
     dd = (np.linalg.norm(T_est[:3, 3]) - np.linalg.norm(T_true[:3, 3])) * 1000.0
@@ -92,6 +118,10 @@ def run_teaching_trial(exp_dir: Path, params: TeachingParams, seed: int, workdir
         "frames_total": ev.frames_total,
         "spread_mm": ev.spread_mm,
         "teach_seconds": seconds,
+        "markers_a": len(task.part_a.markers),
+        "markers_b": len(task.part_b.markers),
+        "markers_per_part": params.markers_per_part,
+        **precision_bound(observed, truth, ev.frames_used, T_true, camera),
     }
 
 
@@ -101,7 +131,15 @@ class TeachingPrecision(Experiment):
     Params = TeachingParams
 
     def check(self, params: TeachingParams) -> None:
-        """``demo`` and ``teacher`` by their models before any trial (they stay dicts: the trial ids hash them)."""
+        """``demo`` and ``teacher`` by their models before any trial (they stay dicts: the trial ids hash them);
+        one of ``structure`` and ``generated``."""
+        if (params.structure is None) == (params.generated is None):
+            raise UserError("params: give either structure or generated ('family:index')")
+        if params.generated is not None:
+            family, _, index = params.generated.partition(":")
+            if family not in STRUCTURE_FAMILIES or not index.isdigit():
+                raise UserError(f"params.generated: {params.generated!r} must be 'family:index' with a family of "
+                                f"{', '.join(STRUCTURE_FAMILIES)}")
         for key, model in (("demo", DemoSettings), ("teacher", ArucoTeacher.Settings)):
             try:
                 model.model_validate(getattr(params, key))
@@ -116,6 +154,9 @@ class TeachingPrecision(Experiment):
         ok = [r["metrics"] for r in rows if r.get("ok")]
         if not ok:
             return []
+        if any(m.get("markers_per_part") is not None for m in ok):
+            # One structure appears with several marker counts: the per-count report replaces the cell table.
+            return write_marker_count_report(rows, out_dir)
         structures = list(dict.fromkeys(m["structure"] for m in ok))
         orients = sorted({m["orientation"] for m in ok})
         cell = {(m["structure"], m["orientation"]): m for m in ok}

@@ -28,7 +28,7 @@ from asmteach.plugins.detectors.aruco.projection import (
     so3_left_jacobian,
 )
 
-__all__ = ["CornerSet", "adjust", "frame_rms", "pack_pose", "unpack_pose"]
+__all__ = ["CornerSet", "adjust", "frame_rms", "jacobian", "pack_pose", "unpack_pose"]
 
 
 @dataclass(frozen=True)
@@ -175,3 +175,12 @@ def adjust(cs: CornerSet, T_A_B: np.ndarray, T_cam_A: Sequence[np.ndarray], K: n
             x, nfev = sol.x, nfev + int(sol.nfev)
     poses = [unpack_pose(x[6 + 6 * k: 12 + 6 * k]) for k in range(cs.n_frames)]
     return unpack_pose(x[:6]), poses, nfev
+
+
+def jacobian(cs: CornerSet, T_A_B: np.ndarray, T_cam_A: Sequence[np.ndarray], K: np.ndarray,
+             dist: np.ndarray) -> np.ndarray:
+    """Dense ``(2n, 6 + 6 m)`` Jacobian of the corners' pixels by ``[r_AB, t_AB, r_cam_A(k), t_cam_A(k) ...]``."""
+    x = np.concatenate([pack_pose(T_A_B)] + [pack_pose(T) for T in T_cam_A])
+    _, J = _evaluate(x, cs, np.asarray(K, dtype=np.float64), np.asarray(dist, dtype=np.float64), jacobian=True)
+    assert J is not None
+    return J.toarray()
