@@ -138,8 +138,10 @@ class TeachingPrecision(Experiment):
         if params.generated is not None:
             family, _, index = params.generated.partition(":")
             if family not in STRUCTURE_FAMILIES or not index.isdigit():
-                raise UserError(f"params.generated: {params.generated!r} must be 'family:index' with a family of "
-                                f"{', '.join(STRUCTURE_FAMILIES)}")
+                raise UserError(
+                    f"params.generated: {params.generated!r} must be 'family:index' with a family of "
+                    f"{', '.join(STRUCTURE_FAMILIES)}"
+                )
         for key, model in (("demo", DemoSettings), ("teacher", ArucoTeacher.Settings)):
             try:
                 model.model_validate(getattr(params, key))
@@ -173,9 +175,15 @@ class TeachingPrecision(Experiment):
         lines = ["| orientation | " + " | ".join(structures) + " |", "|---|" + "---|" * len(structures)]
         for o in orients:
             lines.append(f"| {o} | " + " | ".join(fmt(cell.get((s, o))) for s in structures) + " |")
-        lines.append("| mean abs | " + " | ".join(
-            f"{means[s]['dd_mm']:.2f} ({means[s]['dr_deg']:.2f}, {means[s]['dp_deg']:.2f}, {means[s]['dy_deg']:.2f})"
-            for s in structures) + " |")
+        lines.append(
+            "| mean abs | "
+            + " | ".join(
+                f"{means[s]['dd_mm']:.2f} ({means[s]['dr_deg']:.2f}, {means[s]['dp_deg']:.2f}, "
+                f"{means[s]['dy_deg']:.2f})"
+                for s in structures
+            )
+            + " |"
+        )
         allm = {k: float(np.mean([abs(m[k]) for m in ok])) for k in ("dd_mm", "dr_deg", "dp_deg", "dy_deg")}
         worst_d = max(abs(m["dd_mm"]) for m in ok)
         worst_a = max(max(abs(m["dr_deg"]), abs(m["dp_deg"]), abs(m["dy_deg"])) for m in ok)
@@ -202,15 +210,33 @@ class TeachingPrecision(Experiment):
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        text = [[(f"{cell[(s, o)]['dd_mm']:+.2f}\n({cell[(s, o)]['dr_deg']:+.2f},{cell[(s, o)]['dp_deg']:+.2f},"
-                  f"{cell[(s, o)]['dy_deg']:+.2f})") if (s, o) in cell else "failed" for s in structures]
-                for o in orients]
-        text.append([f"{means[s]['dd_mm']:.2f}\n({means[s]['dr_deg']:.2f},{means[s]['dp_deg']:.2f},"
-                     f"{means[s]['dy_deg']:.2f})" for s in structures])
+        text = [
+            [
+                (
+                    f"{cell[(s, o)]['dd_mm']:+.2f}\n({cell[(s, o)]['dr_deg']:+.2f},{cell[(s, o)]['dp_deg']:+.2f},"
+                    f"{cell[(s, o)]['dy_deg']:+.2f})"
+                )
+                if (s, o) in cell
+                else "failed"
+                for s in structures
+            ]
+            for o in orients
+        ]
+        text.append(
+            [
+                f"{means[s]['dd_mm']:.2f}\n({means[s]['dr_deg']:.2f},{means[s]['dp_deg']:.2f},{means[s]['dy_deg']:.2f})"
+                for s in structures
+            ]
+        )
         fig, ax = plt.subplots(figsize=(2.0 * len(structures) + 1.5, 0.8 * len(text) + 1.2))
         ax.axis("off")
-        tab = ax.table(cellText=text, colLabels=[s.replace("_", "\n", 1) for s in structures],
-                       rowLabels=[f"orient {o}" for o in orients] + ["mean |.|"], loc="center", cellLoc="center")
+        tab = ax.table(
+            cellText=text,
+            colLabels=[s.replace("_", "\n", 1) for s in structures],
+            rowLabels=[f"orient {o}" for o in orients] + ["mean |.|"],
+            loc="center",
+            cellLoc="center",
+        )
         tab.auto_set_font_size(False)
         tab.set_fontsize(7)
         tab.scale(1.0, 2.6)
@@ -240,18 +266,25 @@ class TeachingBreakdown(TeachingPrecision):
         for (name, value), rs in sorted(groups.items()):
             ms = [r["metrics"] for r in rs if r.get("ok")]
             ang = [max(abs(m["dr_deg"]), abs(m["dp_deg"]), abs(m["dy_deg"])) for m in ms]
-            recs.append({
-                "factor": name, "value": value, "trials": len(rs), "ok": len(ms),
-                "dd_abs_median_mm": float(np.median([abs(m["dd_mm"]) for m in ms])) if ms else np.nan,
-                "dd_abs_max_mm": float(np.max([abs(m["dd_mm"]) for m in ms])) if ms else np.nan,
-                "angle_abs_median_deg": float(np.median(ang)) if ang else np.nan,
-                "angle_abs_max_deg": float(np.max(ang)) if ang else np.nan,
-                "v_a_err_median_deg": float(np.median([m["v_a_err_deg"] for m in ms])) if ms else np.nan,
-            })
+            recs.append(
+                {
+                    "factor": name,
+                    "value": value,
+                    "trials": len(rs),
+                    "ok": len(ms),
+                    "dd_abs_median_mm": float(np.median([abs(m["dd_mm"]) for m in ms])) if ms else np.nan,
+                    "dd_abs_max_mm": float(np.max([abs(m["dd_mm"]) for m in ms])) if ms else np.nan,
+                    "angle_abs_median_deg": float(np.median(ang)) if ang else np.nan,
+                    "angle_abs_max_deg": float(np.max(ang)) if ang else np.nan,
+                    "v_a_err_median_deg": float(np.median([m["v_a_err_deg"] for m in ms])) if ms else np.nan,
+                }
+            )
         cols = list(recs[0]) if recs else []
         md = "# Teaching precision breakdown\n\n| " + " | ".join(cols) + " |\n|" + "---|" * len(cols) + "\n"
-        md += "".join("| " + " | ".join(f"{r[c]:.4g}" if isinstance(r[c], float) else str(r[c]) for c in cols)
-                      + " |\n" for r in recs)
+        md += "".join(
+            "| " + " | ".join(f"{r[c]:.4g}" if isinstance(r[c], float) else str(r[c]) for c in cols) + " |\n"
+            for r in recs
+        )
         paths = [write_text(out_dir / "breakdown.md", md), write_text(out_dir / "breakdown.csv", to_csv(recs))]
         factors = [f for f in dict.fromkeys(r["factor"] for r in recs) if f != "baseline"]
         if factors:

@@ -54,8 +54,13 @@ class CornerSet:
             img += [ia, ib]
             fr += [np.full(len(oa) + len(ob), k)]
             isb += [np.zeros(len(oa), bool), np.ones(len(ob), bool)]
-        return cls(np.concatenate(obj).astype(np.float64), np.concatenate(img).astype(np.float64),
-                   np.concatenate(fr), np.concatenate(isb), len(frames))
+        return cls(
+            np.concatenate(obj).astype(np.float64),
+            np.concatenate(img).astype(np.float64),
+            np.concatenate(fr),
+            np.concatenate(isb),
+            len(frames),
+        )
 
     def subset(self, frames: Sequence[int]) -> CornerSet:
         """The given frames (repeats allowed), renumbered ``0 .. len(frames) - 1`` in that order."""
@@ -75,8 +80,9 @@ def unpack_pose(x: np.ndarray) -> np.ndarray:
     return geometry.from_rotvec(x[:3], x[3:6])
 
 
-def _evaluate(x: np.ndarray, cs: CornerSet, K: np.ndarray, dist: np.ndarray,
-              jacobian: bool) -> tuple[np.ndarray, csr_matrix | None]:
+def _evaluate(
+    x: np.ndarray, cs: CornerSet, K: np.ndarray, dist: np.ndarray, jacobian: bool
+) -> tuple[np.ndarray, csr_matrix | None]:
     """Residuals ``(2n,)`` pixels and, optionally, their sparse ``(2n, 6 + 6 m)`` Jacobian."""
     m = cs.n_frames
     r_ab, t_ab = x[:3], x[3:6]
@@ -112,8 +118,9 @@ def _evaluate(x: np.ndarray, cs: CornerSet, K: np.ndarray, dist: np.ndarray,
     return res, csr_matrix((blocks.reshape(-1), indices, indptr), shape=(2 * n, 6 + 6 * m))
 
 
-def frame_rms(cs: CornerSet, T_A_B: np.ndarray, T_cam_A: Sequence[np.ndarray], K: np.ndarray,
-              dist: np.ndarray) -> np.ndarray:
+def frame_rms(
+    cs: CornerSet, T_A_B: np.ndarray, T_cam_A: Sequence[np.ndarray], K: np.ndarray, dist: np.ndarray
+) -> np.ndarray:
     """``(n_frames,)`` RMS reprojection error per frame (pixels, over both image axes' norm)."""
     x = np.concatenate([pack_pose(T_A_B)] + [pack_pose(T) for T in T_cam_A])
     res, _ = _evaluate(x, cs, K, dist, jacobian=False)
@@ -122,9 +129,17 @@ def frame_rms(cs: CornerSet, T_A_B: np.ndarray, T_cam_A: Sequence[np.ndarray], K
     return np.sqrt(sq / np.maximum(cnt, 1))
 
 
-def adjust(cs: CornerSet, T_A_B: np.ndarray, T_cam_A: Sequence[np.ndarray], K: np.ndarray, dist: np.ndarray,
-           *, f_scale: float = 0.5, max_rounds: int = 6, dense_max_unknowns: int = 400
-           ) -> tuple[np.ndarray, list[np.ndarray], int]:
+def adjust(
+    cs: CornerSet,
+    T_A_B: np.ndarray,
+    T_cam_A: Sequence[np.ndarray],
+    K: np.ndarray,
+    dist: np.ndarray,
+    *,
+    f_scale: float = 0.5,
+    max_rounds: int = 6,
+    dense_max_unknowns: int = 400,
+) -> tuple[np.ndarray, list[np.ndarray], int]:
     """Huber-robust adjustment (Huber scale ``f_scale`` pixels on each corner's error) from the given start.
 
     Up to ``dense_max_unknowns`` unknowns (about 65 frames): iteratively
@@ -157,8 +172,17 @@ def adjust(cs: CornerSet, T_A_B: np.ndarray, T_cam_A: Sequence[np.ndarray], K: n
     x = np.concatenate([pack_pose(T_A_B)] + [pack_pose(T) for T in T_cam_A])
     nfev = 0
     if x.size > dense_max_unknowns:
-        sol = least_squares(lambda x: both(x)[0], x, jac=lambda x: both(x)[1], loss="huber", f_scale=f_scale,
-                            x_scale="jac", method="trf", tr_solver="lsmr", max_nfev=400)
+        sol = least_squares(
+            lambda x: both(x)[0],
+            x,
+            jac=lambda x: both(x)[1],
+            loss="huber",
+            f_scale=f_scale,
+            x_scale="jac",
+            method="trf",
+            tr_solver="lsmr",
+            max_nfev=400,
+        )
         x, nfev = sol.x, int(sol.nfev)
     else:
         w_prev = np.zeros(len(cs.obj))
@@ -169,16 +193,21 @@ def adjust(cs: CornerSet, T_A_B: np.ndarray, T_cam_A: Sequence[np.ndarray], K: n
                 break
             w_prev = w
             sw = np.repeat(np.sqrt(w), 2)
-            sol = least_squares(lambda x, sw=sw: both(x)[0] * sw,
-                                x, jac=lambda x, sw=sw: both(x)[1].multiply(sw[:, None]).toarray(),
-                                method="lm", x_scale="jac")
+            sol = least_squares(
+                lambda x, sw=sw: both(x)[0] * sw,
+                x,
+                jac=lambda x, sw=sw: both(x)[1].multiply(sw[:, None]).toarray(),
+                method="lm",
+                x_scale="jac",
+            )
             x, nfev = sol.x, nfev + int(sol.nfev)
-    poses = [unpack_pose(x[6 + 6 * k: 12 + 6 * k]) for k in range(cs.n_frames)]
+    poses = [unpack_pose(x[6 + 6 * k : 12 + 6 * k]) for k in range(cs.n_frames)]
     return unpack_pose(x[:6]), poses, nfev
 
 
-def jacobian(cs: CornerSet, T_A_B: np.ndarray, T_cam_A: Sequence[np.ndarray], K: np.ndarray,
-             dist: np.ndarray) -> np.ndarray:
+def jacobian(
+    cs: CornerSet, T_A_B: np.ndarray, T_cam_A: Sequence[np.ndarray], K: np.ndarray, dist: np.ndarray
+) -> np.ndarray:
     """Dense ``(2n, 6 + 6 m)`` Jacobian of the corners' pixels by ``[r_AB, t_AB, r_cam_A(k), t_cam_A(k) ...]``."""
     x = np.concatenate([pack_pose(T_A_B)] + [pack_pose(T) for T in T_cam_A])
     _, J = _evaluate(x, cs, np.asarray(K, dtype=np.float64), np.asarray(dist, dtype=np.float64), jacobian=True)

@@ -53,13 +53,22 @@ class ArucoTeacherSettings(StrictModel):
     """Settings of the ``aruco`` teacher (lengths in metres, angles in degrees, errors in pixels)."""
 
     corner_refinement: RefineMethod = Field("edges", description="edges: line fits to the marker's outer edges")
-    edge_max_line_rms: float = Field(0.25, gt=0, description="edges: a marker side whose edge points scatter more "
-                                     "than this (pixels RMS) about its line, or more than 2.5 times the edge-point "
-                                     "noise measured on the marker's own sides if that is larger, is not trusted "
-                                     "(marker dropped)")
-    edge_min_inliers: float = Field(0.85, gt=0, le=1, description="edges: fraction of a side's edge profiles that "
-                                    "must be clean steps (docs/results/real_sensor_data.md, section 2: a real "
-                                    "JPEG's small markers fail this on some sides)")
+    edge_max_line_rms: float = Field(
+        0.25,
+        gt=0,
+        description="edges: a marker side whose edge points scatter more "
+        "than this (pixels RMS) about its line, or more than 2.5 times the edge-point "
+        "noise measured on the marker's own sides if that is larger, is not trusted "
+        "(marker dropped)",
+    )
+    edge_min_inliers: float = Field(
+        0.85,
+        gt=0,
+        le=1,
+        description="edges: fraction of a side's edge profiles that "
+        "must be clean steps (docs/results/real_sensor_data.md, section 2: a real "
+        "JPEG's small markers fail this on some sides)",
+    )
     marker_reject_px: float = Field(1.0, gt=0, description="drop a marker whose RMS reprojection error exceeds this")
     frame_reject_px: float = Field(1.0, gt=0, description="drop a frame whose RMS reprojection error exceeds this")
     min_frames: int = Field(3, ge=1, description="assembled frames needed (both parts seen)")
@@ -67,14 +76,19 @@ class ArucoTeacherSettings(StrictModel):
     assembled_angle_deg: float = Field(4.0, gt=0, description="... and rotations this close")
     fusion_k: float = Field(3.0, gt=0, description="outlier threshold of the fusion, robust standard deviations")
     joint_refine: bool = Field(True, description="joint LM adjustment of T_A_B over all kept frames")
-    joint_reject_px: float = Field(0.3, gt=0, description="joint adjustment drops frames whose RMS exceeds this and "
-                                   "four times the median")
+    joint_reject_px: float = Field(
+        0.3, gt=0, description="joint adjustment drops frames whose RMS exceeds this and four times the median"
+    )
     min_approach_frames: int = Field(3, ge=2, description="approach frames needed to learn v_a")
     min_approach_travel: float = Field(0.01, gt=0, description="B must travel this far toward A to learn v_a")
     check_insertion: bool = Field(True, description="check v_a with python-fcl; fall back to geometry if it fails")
     retract: float = Field(0.5, gt=0, description="retreat distance of the check along -v_a, metres")
-    snap_cone_deg: float = Field(6.0, gt=0, le=30, description="a learned v_a failing the check moves to the free "
-                                 "retreat directions within this cone, degrees")
+    snap_cone_deg: float = Field(
+        6.0,
+        gt=0,
+        le=30,
+        description="a learned v_a failing the check moves to the free retreat directions within this cone, degrees",
+    )
     collision_tolerance: float = Field(5e-4, ge=0, description="meshes shrunk by this for contact checks, metres")
     threads: int | None = Field(None, ge=1, description="detection threads (default: all cores)")
 
@@ -110,8 +124,9 @@ class ArucoTeacher(Teacher):
     DemoSettings = DemoSettings
     """The run config's ``demo`` section (the rendered demonstration), checked by the config loader."""
 
-    def demonstrate(self, task: AssemblyTask, demo: dict, camera_file: Path | None = None,
-                    out_dir: Path | None = None) -> tuple[list[np.ndarray], CameraIntrinsics]:
+    def demonstrate(
+        self, task: AssemblyTask, demo: dict, camera_file: Path | None = None, out_dir: Path | None = None
+    ) -> tuple[list[np.ndarray], CameraIntrinsics]:
         """Rendered demonstration frames with exact ground truth; see :mod:`.demonstration`."""
         from asmteach.plugins.detectors.aruco.demonstration import demonstrate
 
@@ -128,9 +143,12 @@ class ArucoTeacher(Teacher):
     def observe(self, frames: Sequence[np.ndarray], camera: CameraIntrinsics, task: AssemblyTask) -> list[FrameResult]:
         """Detect markers and solve each part's pose in every frame."""
         table = marker_table(task.part_a, task.part_b)
-        det = MarkerDetector({k[0] for k in table}, refine=self.settings.corner_refinement,
-                             edge_max_line_rms=self.settings.edge_max_line_rms,
-                             edge_min_inliers=self.settings.edge_min_inliers)
+        det = MarkerDetector(
+            {k[0] for k in table},
+            refine=self.settings.corner_refinement,
+            edge_max_line_rms=self.settings.edge_max_line_rms,
+            edge_min_inliers=self.settings.edge_min_inliers,
+        )
         K, dist = camera.K, camera.dist_array
         results: list[FrameResult] = []
         prior: dict[str, np.ndarray | None] = {"A": None, "B": None}
@@ -157,7 +175,8 @@ class ArucoTeacher(Teacher):
                 priors = [prior[role]] if prior[role] is not None else None
                 poses[role] = (
                     solve_part_pose(obs[role], K, dist, priors=priors, reject_px=self.settings.marker_reject_px)
-                    if obs[role] else None
+                    if obs[role]
+                    else None
                 )
                 if poses[role] is not None:
                     prior[role] = poses[role].T_cam_part
@@ -244,20 +263,24 @@ class ArucoTeacher(Teacher):
                     f"learned v_a {np.round(v_a, 3).tolist()} fails the retreat check (collision at "
                     f"{(chk.first_collision or s.retract) * 1000:.1f} mm)"
                 )
-                cone = free_cone_centre(*meshes, T_A_B, v_a, cone_deg=s.snap_cone_deg, retract=s.retract,
-                                        tolerance=s.collision_tolerance)
+                cone = free_cone_centre(
+                    *meshes, T_A_B, v_a, cone_deg=s.snap_cone_deg, retract=s.retract, tolerance=s.collision_tolerance
+                )
                 if cone is not None:
                     moved = float(np.degrees(np.arccos(np.clip(np.dot(cone[0], v_a), -1.0, 1.0))))
                     v_a = cone[0]
-                    notes.append(f"v_a moved {moved:.2f} deg to the centre of the {cone[1]} free retreat direction(s) "
-                                 f"within {s.snap_cone_deg:g} deg of the demonstrated one (python-fcl)")
+                    notes.append(
+                        f"v_a moved {moved:.2f} deg to the centre of the {cone[1]} free retreat direction(s) "
+                        f"within {s.snap_cone_deg:g} deg of the demonstrated one (python-fcl)"
+                    )
                 else:
                     notes.append(f"no free retreat within {s.snap_cone_deg:g} deg; trying the geometric direction")
                     try:
                         v_a, travel = separation_direction(*meshes, T_A_B, tolerance=s.collision_tolerance)
                         source = "geometric"
                         notes.append(
-                            f"v_a from geometry: least-travel free retreat ({travel * 1000:.0f} mm to clear A)")
+                            f"v_a from geometry: least-travel free retreat ({travel * 1000:.0f} mm to clear A)"
+                        )
                     except ValueError:
                         # The taught pose itself interpenetrates beyond the tolerance: keep what was demonstrated.
                         notes.append("no straight free retreat from the taught pose; keeping the demonstrated v_a")
@@ -307,13 +330,15 @@ class ArucoTeacher(Teacher):
             for k, (Ta, Tb) in enumerate(options):
                 T = geometry.invert(Ta) @ Tb
                 cost = geometry.translation_distance(T, ref) / s.assembled_radius + geometry.rotation_distance(
-                    T, ref) / np.radians(s.assembled_angle_deg)
+                    T, ref
+                ) / np.radians(s.assembled_angle_deg)
                 if cost < best_cost:
                     best, best_cost = (k, T), cost
             assert best is not None
             k, T = best
             if geometry.translation_distance(T, ref) <= 2 * s.assembled_radius and geometry.rotation_distance(
-                T, ref) <= np.radians(2 * s.assembled_angle_deg):
+                T, ref
+            ) <= np.radians(2 * s.assembled_angle_deg):
                 if k > 0:
                     flips += 1
                     Ta, Tb = options[k]
@@ -322,8 +347,9 @@ class ArucoTeacher(Teacher):
                 cluster.append(r)
         return cluster, flips
 
-    def _joint_refine(self, frames: list[FrameResult], T_A_B: np.ndarray, camera: CameraIntrinsics
-                      ) -> tuple[np.ndarray, str, list[FrameResult]]:
+    def _joint_refine(
+        self, frames: list[FrameResult], T_A_B: np.ndarray, camera: CameraIntrinsics
+    ) -> tuple[np.ndarray, str, list[FrameResult]]:
         """Least-squares over all kept frames' corners: unknowns ``T_A_B`` and each ``T_cam_A`` (Huber loss,
         analytic Jacobian, all frames projected at once: :mod:`.joint`).
 
@@ -381,8 +407,10 @@ class ArucoTeacher(Teacher):
         sub = corners.subset(active)
         rms1 = _rms_all(frame_rms(sub, T, [starts[i] for i in active], K, dist), sub)
         shift = geometry.translation_distance(T, T0) * 1000.0
-        note = (f"joint adjustment over {len(active)} frame(s): RMS {rms0:.3f} -> {rms1:.3f} px, "
-                f"moved T_A_B by {shift:.3f} mm")
+        note = (
+            f"joint adjustment over {len(active)} frame(s): RMS {rms0:.3f} -> {rms1:.3f} px, "
+            f"moved T_A_B by {shift:.3f} mm"
+        )
         if dropped:
             note += f"; frame(s) {sorted(dropped)} dropped (do not fit one rigid T_A_B)"
         return T, note, [frames[i] for i in active]
