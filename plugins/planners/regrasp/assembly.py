@@ -59,6 +59,7 @@ from asmteach.plugins.planners.regrasp.graph import (
     KeyframeSearch,
     PoseSlot,
     build_regrasp_graph,
+    explain_cut,
     search_keyframes,
 )
 from asmteach.plugins.planners.regrasp.motions import MotionFailure, cleared_scene
@@ -285,6 +286,8 @@ def plan_transfer(
                 reason += f": {layers[0].summary()}"
             elif search.cut == "goal":
                 reason += ": " + "; ".join(f.summary() for f in layers[1:n_end])
+            elif search.cut == "between" and (why := explain_cut(G, layers)):
+                reason += f"; {why}"
             if last_reason is not None:
                 reason += f"; last motion failure: {last_reason}"
             stats.update(cut=search.cut, components=search.components)

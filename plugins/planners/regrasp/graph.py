@@ -34,6 +34,7 @@ __all__ = [
     "KeyframeSearch",
     "PoseSlot",
     "build_regrasp_graph",
+    "explain_cut",
     "search_keyframes",
 ]
 
@@ -206,3 +207,34 @@ def search_keyframes(G: nx.Graph, *, banned_edges: Iterable[tuple[Node, Node]] =
     nodes = [n for n in path if n not in (START, GOAL)]
     regrasps = sum(G.edges[a, b]["kind"] == "transit" for a, b in itertools.pairwise(nodes))
     return KeyframeSearch(True, nodes=nodes, cost=float(cost), regrasps=regrasps)
+
+
+def explain_cut(G: nx.Graph, layers: Sequence[GraspFeasibility]) -> str:
+    """Why no path joins the start to the goal, in words: the slots the start's grasps reach (the start's
+    connected group of grasp nodes), and how the same grasps fail at every other table slot, counted by
+    rejection kind (:class:`Rejected`, those hitting the table in brackets). Empty when no grasp is feasible
+    at the start."""
+    start = [n for n in G.neighbors(START)]
+    if not start:
+        return ""
+    grasps = G.subgraph([n for n in G if n not in (START, GOAL)])
+    group: set[Node] = set()
+    for n in start:
+        if n not in group:
+            group |= nx.node_connected_component(grasps, n)
+    reached = sorted({n[0] for n in group} - {"start"})
+    variants = {n[1] for n in group}
+    kinds: Counter[str] = Counter()
+    table: Counter[str] = Counter()
+    others = [f for f in layers if f.slot.layer == "middle" and f.slot.name not in reached]
+    for f in others:
+        for (vid, _), r in f.rejected.items():
+            if vid in variants or (vid % 2 == 0 and vid + 1 in variants):  # a screened grasp is keyed unflipped
+                kinds[r.kind.value] += 1
+                table[r.kind.value] += r.table
+    names = ", ".join(reached[:3]) + (", ..." if len(reached) > 3 else "")
+    where = f"{len(reached)} other slots ({names})" if reached else "no other slot"
+    why = ", ".join(f"{n} {k}" + (f" ({table[k]} with the table)" if table[k] else "") for k, n in kinds.most_common())
+    return f"the start's {len(variants)} grasp variants reach {where}" + (
+        f"; at the {len(others)} other table slots: {why}" if why else ""
+    )

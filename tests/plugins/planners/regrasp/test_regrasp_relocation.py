@@ -176,6 +176,9 @@ def test_without_relocations_the_peg_cannot_be_turned(peg) -> None:
     assert "relocations" not in res.stats
     # grasps at the start and at the goal, none connecting them: the regrasp graph is cut, not the grasps
     assert res.stats["cut"] == "between" and res.cause is FailureCause.REGRASP_GRAPH
+    # and the reason says how far the start's grasps get, and why they fail at the other placements
+    assert "the start's 1 grasp variants reach 2 other slots (placement" in res.reason
+    assert "other table slots: 10 approach not from above;" in res.reason
 
 
 def test_a_position_too_near_an_obstacle_is_skipped_for_the_next(peg) -> None:
