@@ -10,12 +10,14 @@ seconds on the robot's clock (motion executed since the run's first motion).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
 from asmteach.core.failures import FailureCause
 from asmteach.core.models import AssemblyTask, RunReport
+from asmteach.core.pose_error import nearest_symmetric
 
 __all__ = ["RELEASE_DROP_MM", "RELEASE_TILT_DEG", "SLIP_NOTE_MM", "failure_story", "insertion_error"]
 
@@ -57,7 +59,11 @@ def _angle(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def insertion_error(
-    report: RunReport, learned: AssemblyTask, true_task: AssemblyTask, T_world_a_goal: np.ndarray
+    report: RunReport,
+    learned: AssemblyTask,
+    true_task: AssemblyTask,
+    T_world_a_goal: np.ndarray,
+    sym_a: Sequence[np.ndarray] = (),
 ) -> dict[str, float] | None:
     """Where the part being inserted was, across the insertion line, when the insertion began, and why.
 
@@ -66,7 +72,8 @@ def insertion_error(
     off by (``grasp``: the part's detection, its regrasps and the grasp itself, against the plan's B goal,
     A's goal @ taught T_A_B), where A stood against its goal (``a_place``) and the taught T_A_B against the true
     one (``taught``). Each as ``<name>_mm`` across the insertion line and ``<name>_deg`` of the part's
-    insertion axis; ``total_mm``/``total_deg`` part against seat. None without an insertion event.
+    insertion axis; ``total_mm``/``total_deg`` part against seat. A symmetric A (``sym_a``, part-frame
+    symmetries) is taken in its pose nearest its goal. None without an insertion event.
     """
     evs = [e for e in _events(report) if "insertion" in e and "T_tcp_part" in e and "T_world_other" in e]
     if not evs:
@@ -77,7 +84,7 @@ def insertion_error(
     if np.linalg.norm(line) < 1e-9:
         return None
     d = line / np.linalg.norm(line)
-    T_a = np.asarray(ev["T_world_other"])
+    T_a = nearest_symmetric(np.asarray(ev["T_world_other"]), T_world_a_goal, sym_a)
     E = T_end @ np.asarray(ev["T_tcp_part"])  # the part where the planned motion takes it
     G = np.asarray(T_world_a_goal) @ learned.T_A_B  # where the plan meant it to go
     M = T_a @ learned.T_A_B  # the taught seat in A as it stands

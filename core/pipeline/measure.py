@@ -50,7 +50,7 @@ def measure_stage(
                 "T_A_B_true": true_task.T_A_B.tolist(),
             },
         )
-        split = insertion_error(run.report, learned, true_task, result.T_world_a_goal)
+        split = insertion_error(run.report, learned, true_task, result.T_world_a_goal, sym_a)
         if split is not None:
             d["insertion_error"] = split
         run.report.success = bool(ok)

@@ -154,3 +154,31 @@ def test_the_insertion_error_is_split_into_grasp_placement_and_teaching() -> Non
     text, cause, evidence = failure_story(_report(ev), split)
     assert cause is FailureCause.OFF_GOAL
     assert "grasp 0.30 mm" in text and "taught pose 0.40 mm" in text and evidence["insertion_error"] == split
+
+
+def test_a_symmetric_a_standing_in_its_twin_pose_splits_as_in_the_pose_nearest_its_goal() -> None:
+    """A block turned 180 deg about x is the same solid (its symmetry): without it the split would read a
+    180 deg 'placement error' and a part 'upside down' in its seat."""
+    spec = PartSpec(name="p", solid=None, mesh="p.stl")
+    seat = _T((0.0, 0.0, 0.015))
+    task = AssemblyTask(name="t", part_a=spec, part_b=spec, T_A_B=seat, v_a=[0.0, 0.0, 1.0])
+    flip = np.diag([1.0, -1.0, -1.0, 1.0])
+    flip[2, 3] = 0.03  # the block's frame at its bottom face: turned over, the frame sits 30 mm up
+    a_goal = _T((0.4, 0.0, 0.0))
+    T_tcp_part = _T((0.0, 0.0, -0.1))
+    T_end = a_goal @ seat @ np.linalg.inv(T_tcp_part)
+    T_start = T_end.copy()
+    T_start[2, 3] += 0.03
+    ev = {
+        "label": "insert p",
+        "part": "p",
+        "insertion": {"inserted": True},
+        "T_world_tcp_start": T_start.tolist(),
+        "T_world_tcp_end": T_end.tolist(),
+        "T_tcp_part": T_tcp_part.tolist(),
+        "T_world_other": (a_goal @ flip).tolist(),
+    }
+    plain = insertion_error(_report(ev), task, task, a_goal)
+    assert plain is not None and plain["a_place_deg"] > 179.0
+    split = insertion_error(_report(ev), task, task, a_goal, [np.eye(4), np.linalg.inv(flip)])
+    assert split is not None and max(split.values()) < 1e-6
