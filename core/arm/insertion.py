@@ -14,7 +14,9 @@ real cell inserts force-guided instead; :func:`guarded_insert` does the same on 
 - on resistance short of the planned depth it backs off and shifts the line sideways (perpendicular to
   the insertion): away from where the contact pushed, else along a spiral of growing radius, as a cell's
   search insertion does; it never pushes past ``force_limit_n`` or ``slip_limit_m``;
-- it watches the other part: how far it moved while the part came in, and when.
+- it watches the other part: how far it moved while the part came in, and when; the other part pushed more
+  than ``other_moved_m`` since the last correction is resistance too (a light part slides on the table
+  before any force builds up).
 
 Units: metres, newtons, seconds (the robot's clock: the executed trajectories' own seconds). Frames: world.
 """
@@ -66,7 +68,8 @@ class InsertionSettings:
     and ``force_limit_n``: resistance (slip of the part in the hand since the start, contact force between the
     parts); ``seated_m``: resistance this close to the planned end is the part seated; ``backoff_m``: how far
     it backs out before a sideways correction; ``search_step_m`` and ``search_radius_m``: size of one sideways
-    correction and the farthest it shifts the line; ``max_tries``: corrections before it gives up (a jam).
+    correction and the farthest it shifts the line; ``max_tries``: corrections before it gives up (a jam);
+    ``other_moved_m``: the other part pushed this far is resistance.
     """
 
     step_m: float = 0.0005
@@ -153,6 +156,8 @@ class _Guard:
         T_tcp = robot.fk(self.arm, robot.current(self.arm))
         self.T_tcp_part = geometry.invert(T_tcp) @ robot.part_pose(part)  # the part in the hand now
         self.T_other0 = robot.part_pose(other) if other else None
+        self.T_other_ref = self.T_other0  # the other part since the last correction: pushed from here is resistance
+        self.other_push = 0.0
         self.seconds = 0.0
         self.other_moved, self.other_moved_t = 0.0, None
         seconds = float(traj.times[-1] - traj.times[0])
@@ -185,11 +190,19 @@ class _Guard:
     def _watch_other(self) -> None:
         if self.T_other0 is None or self.other is None:
             return
-        moved = geometry.translation_distance(self.robot.part_pose(self.other), self.T_other0)
+        T = self.robot.part_pose(self.other)
+        moved = geometry.translation_distance(T, self.T_other0)
         if moved > self.other_moved:
             self.other_moved = moved
         if self.other_moved_t is None and moved > self.s.other_moved_m:
             self.other_moved_t = self.seconds
+        self.other_push = geometry.translation_distance(T, self.T_other_ref)
+
+    def settle_other(self) -> None:
+        """Where the other part stands now is where it should stay (after a correction)."""
+        if self.other is not None:
+            self.T_other_ref = self.robot.part_pose(self.other)
+        self.other_push = 0.0
 
     def reading(self, s: float, offset: np.ndarray) -> tuple[float, float, float, np.ndarray | None]:
         """``(slip_m, force_n, depth_m, lateral push direction or None)`` after a step to ``s``."""
@@ -216,7 +229,13 @@ class _Guard:
         return slip, force, depth, away
 
     def resisted(self, slip: float, force: float) -> bool:
-        return slip > self.s.slip_limit_m or (np.isfinite(force) and force > self.s.force_limit_n)
+        """Too much slip in the hand, too much contact force, or the other part pushed along (a part that
+        slides freely on the table resists little: its moving is the only sign)."""
+        return (
+            slip > self.s.slip_limit_m
+            or (np.isfinite(force) and force > self.s.force_limit_n)
+            or self.other_push > self.s.other_moved_m
+        )
 
 
 def _perpendicular(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -299,6 +318,7 @@ def guarded_insert(
         if not g.move_to(g.pose_at(pos, offset)):
             out.reason = "no IK for the sideways correction"
             break
+        g.settle_other()
     out.depth_m = best_depth if not out.inserted else max(best_depth, g.reading(pos, offset)[2])
     out.correction_m = offset
     out.seconds = g.seconds

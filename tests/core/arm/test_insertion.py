@@ -119,6 +119,31 @@ def test_a_hole_out_of_reach_is_a_jam_at_the_rim_not_a_shove() -> None:
     assert world.max_force < 50.0  # a blind insertion would have pushed 20 mm past the rim: 1000 N
 
 
+class _SlidingBlockWorld(_HoleWorld):
+    """The block slides on the table as the part pushes on its rim (no force builds up, nothing slips)."""
+
+    def execute(self, traj: Trajectory) -> None:
+        super().execute(traj)
+        push = float(np.linalg.norm(self.q - self.part))
+        self.block = self.block + push * self.d  # dragged along by the part
+        self.axis_point = self.axis_point + push * self.d
+        self.start = self.start + push * self.d
+        self.part = self.q.copy()
+        self.max_force = 0.0
+
+    def part_pose(self, name: str) -> np.ndarray:
+        return self.fk("", self.part if name == "peg" else self.block)
+
+
+def test_a_block_pushed_along_is_resistance_too() -> None:
+    world = _SlidingBlockWorld(np.zeros(3), np.array([0.0, 0.0, -1.0]), np.array([0.0009, 0.0, 0.0]), 0.0003)
+    world.block = np.zeros(3)
+    out = guarded_insert(world, _line(world, 0.03), "peg", "block")
+    assert out.contacts  # it noticed the block moving and corrected
+    assert out.inserted and out.other_moved_m < 0.01  # unguarded it is dragged 20 mm, the rest of the way
+    assert out.other_moved_t_s is not None
+
+
 def test_a_seat_where_the_plan_ends_is_inserted() -> None:
     """A blind hole's bottom met within the last millimetre and a half is the part seated, not a jam."""
     world = _SensingHoleWorld(
