@@ -280,20 +280,13 @@ def _free_space_violation(
     if not near.any():
         return 0.0
     eye = geometry.transform_points(T_part_world, viewpoint[None])[0]
-    pts = local[near]
-    # Only a ray through the model's bounding sphere can meet the model, and never nearer than the sphere's
-    # near side: the other points are cast no ray (about two in three, mostly table beside the part). The
-    # slack keeps float32 ray casting on the safe side of both tests.
-    d = pts - eye
+    # Only rays through the model's bounding sphere, beyond its near side, can meet the model in front of their
+    # point (slack for float32 ray casting): the others (two in three, mostly table beside the part) get none.
+    pts, c, r = local[near], model.center - eye, model.radius * (1.0 + 1e-6) + 1e-6
+    d, reach = pts - eye, float(np.linalg.norm(c))
     dist = np.sqrt(np.einsum("ij,ij->i", d, d))
-    to_centre = model.center - eye
-    reach = float(np.linalg.norm(to_centre))
-    along = (d @ to_centre) / dist
-    radius = model.radius * (1.0 + 1e-6) + 1e-6
-    maybe = (reach * reach - along * along < radius * radius) & (dist - margin > reach - radius - 1e-5)
-    if not maybe.any():
-        return 0.0
-    hit, cast = ray_depths(model, eye, pts[maybe])
+    maybe = (reach * reach - ((d @ c) / dist) ** 2 < r * r) & (dist - margin > reach - r - 1e-5)
+    hit, cast = ray_depths(model, eye, pts[maybe]) if maybe.any() else (np.zeros(0), np.zeros(0))
     return float(np.sum(hit < cast - margin) / len(pts))
 
 
@@ -395,11 +388,9 @@ def surface_check(
     lo, hi = asked.min(axis=0) - 1.01 * ray_radius, asked.max(axis=0) + 1.01 * ray_radius
     # The box lies within the cone tan^2(angle to the axis) <= 2 b^2 (b its largest |coordinate|): the seen
     # rays outside it (most of the context) are dropped before their projection; the slack only keeps more.
-    along = obs @ axis
-    sq = np.einsum("ij,ij->i", obs, obs)
+    along, sq = obs @ axis, np.einsum("ij,ij->i", obs, obs)
     b2 = 2.0 * float(np.max(np.maximum(np.abs(lo), np.abs(hi)))) ** 2 * (1.0 + 1e-6) + 1e-12
-    cone = np.flatnonzero((along > 0) & (sq - along * along <= b2 * along * along))
-    obs = obs[cone]
+    obs = obs[(along > 0) & (sq - along * along <= b2 * along * along)]
     obs_dist = np.linalg.norm(obs, axis=1)
     seen = plane(obs / obs_dist[:, None])
     keep = np.flatnonzero(np.all((seen >= lo) & (seen <= hi), axis=1))
