@@ -93,7 +93,10 @@ def test_report_counts_markers_seen_and_repeated_trials_once(tmp_path: Path) -> 
     ]
     paths = write_marker_count_report(rows, tmp_path)
     md = paths[0].read_text()
-    # s1 with 2 markers kept saw one, as with 1 kept: the same trial, counted once; count 1 holds s1 and s2.
-    assert "| 1 | 2 | 0.3 |" in md
-    assert "| 2 | 1 | 0.1 |" in md
-    assert "3 distinct trials, 1 failed." in md
+    # Kept: every trial in its own group (s1 k=1 and s2 at 1 marker, s1 k=2, s1 k=3).
+    assert "| kept | 1 | 2 | 0.3 |" in md
+    assert "| kept | 2 | 1 | 0.2 |" in md
+    # Seen: s1 with 2 markers kept saw one, as with 1 kept: the same trial, counted once beside s2.
+    assert "| seen | 1 | 2 | 0.3 |" in md
+    assert "| seen | 2 | 1 | 0.1 |" in md
+    assert "4 trials (3 distinct), 1 failed." in md
