@@ -33,7 +33,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import trimesh
-import trimesh.collision
 
 from asmteach.core.errors import UserError
 from asmteach.core.geometry import compose, from_rotation, rot_z, transform_points
@@ -47,6 +46,7 @@ __all__ = [
     "assembly_goal_at",
     "choose_assembly_goal",
     "clear_retraction",
+    "free_travel",
     "ranked_assembly_goals",
     "slides_out",
 ]
@@ -188,11 +188,15 @@ def clear_retraction(
 
 
 SLIDE_PROBE = 0.002
-"""Metres B is moved along a downhill free direction to tell whether it slides: the success tolerance."""
+"""Metres B must be free to travel along a downhill direction to count as sliding: the success tolerance."""
 
 SLIDE_SLOPE = float(np.radians(10.0))
 """Radians below horizontal from which B is taken to slide along a free direction (friction holds it on
 gentler slopes: 10 deg is well inside the 16.7 deg friction cone of mu = 0.3)."""
+
+
+SLIDE_TOLERANCE = 0.0005
+"""Metres B may stand inside A or off its seat by the taught pose's noise and still rest on it."""
 
 
 def slides_out(
@@ -210,27 +214,41 @@ def slides_out(
 
     B falls if nothing is under it, and slides along its insertion line (``v_world``, unit: on into A, or
     back out), where A leaves it free: straight down and each of the two directions along the line that
-    points more than ``slope`` radians below horizontal are tried; B moved ``probe`` metres along one
-    without meeting A or the table (python-fcl) is not held. A peg whose head rests on A, or whose tip
-    rests on a hole's bottom or the table, is held; a slider in a through slot stood on end, a peg in a
-    blind hole deeper than its insertion, or a B taught floating above its seat, is not.
+    points more than ``slope`` radians below horizontal are tried. B is not held when it can travel
+    ``probe`` metres along one before meeting A or the table (:func:`free_travel`). A peg whose head rests
+    on A, or whose tip rests on a hole's bottom or the table, is held; a slider in a through slot stood on
+    end, a peg in a blind hole deeper than its insertion, or a B taught floating above its seat, is not.
     """
     v = np.asarray(v_world, float) / np.linalg.norm(v_world)
     downhill = [np.array([0.0, 0.0, -1.0])] + [d for d in (v, -v) if d[2] < -np.sin(slope)]
-    lo = transform_points(T_world_a, part_a.mesh.vertices).min(axis=0)
-    hi = transform_points(T_world_a, part_a.mesh.vertices).max(axis=0)
-    T_table = from_rotation(np.eye(3), [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), table_height - 0.05])
-    slab = trimesh.creation.box(extents=[1.0, 1.0, 0.1])  # under A and well beyond: B's table
-    # Triangle intersection (fcl's mesh-mesh distance is unreliable between non-convex meshes in contact).
-    world = trimesh.collision.CollisionManager()
-    world.add_object("A", part_a.mesh, np.asarray(T_world_a, float))
-    world.add_object("table", slab, T_table)
-    for d in downhill:
-        T = np.asarray(T_world_b, float).copy()
-        T[:3, 3] += probe * d
-        if not world.in_collision_single(part_b.mesh, T):
-            return True
-    return False
+    a = part_a.mesh.copy().apply_transform(np.asarray(T_world_a, float))
+    b = part_b.mesh.copy().apply_transform(np.asarray(T_world_b, float))
+    return any(free_travel(a, b, d, table_height) >= probe for d in downhill)
+
+
+def free_travel(a: trimesh.Trimesh, b: trimesh.Trimesh, d: np.ndarray, table_height: float) -> float:
+    """Metres mesh ``b`` can move along unit ``d`` before it meets mesh ``a`` or the table (both in the world).
+
+    Rays along ``d`` from B's vertices and face centres to A and to the table plane, and along ``-d`` from
+    A's to B: a polyhedron meets another first with a vertex on a face (edge-on-edge contacts are not seen;
+    the face centres catch faces flush with each other whose vertices all lie on the other's edges). Each
+    ray starts :data:`SLIDE_TOLERANCE` behind its vertex, so a B sunk that far into its seat by the taught
+    pose's noise still rests on it. ``inf`` when nothing is in the way.
+    """
+    d = np.asarray(d, float)
+    tol = SLIDE_TOLERANCE
+    travel = [np.inf]
+    for src, dst, sign in ((b, a, 1.0), (a, b, -1.0)):
+        # vertices and face centres: two faces flush with each other may have every vertex on the other's edge
+        points = np.concatenate([np.asarray(src.vertices, float), np.asarray(src.triangles_center, float)])
+        origins = points - tol * sign * d
+        dirs = np.broadcast_to(sign * d, origins.shape)
+        loc, ray, _ = dst.ray.intersects_location(origins, dirs, multiple_hits=False)
+        if len(ray):
+            travel.append(float(np.min(np.einsum("ij,ij->i", loc - origins[ray], dirs[ray]))) - tol)
+    if d[2] < 0.0:
+        travel.append(float((np.min(b.vertices[:, 2]) - table_height) / -d[2]))
+    return max(0.0, min(travel))
 
 
 def _lowest(part: PartModel, T_world_part: np.ndarray) -> float:
