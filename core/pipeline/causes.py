@@ -19,7 +19,7 @@ from asmteach.core.failures import FailureCause
 from asmteach.core.models import AssemblyTask, RunReport
 from asmteach.core.pose_error import nearest_symmetric
 
-__all__ = ["RELEASE_DROP_MM", "RELEASE_TILT_DEG", "SLIP_NOTE_MM", "failure_story", "insertion_error"]
+__all__ = ["RELEASE_DROP_MM", "RELEASE_TILT_DEG", "SLIP_NOTE_MM", "failure_story", "insertion_error", "jam_note"]
 
 SLIP_NOTE_MM = 1.0
 """A part this far (mm) from where the hand should hold it at its release was pushed in the hand: the motion
@@ -114,6 +114,21 @@ def _split_note(split: dict[str, float] | None) -> str:
     )
 
 
+def jam_note(ev: dict[str, Any]) -> str:
+    """What a guarded insertion that stopped short did, from its trace event: depth of length, the largest
+    contact force, when, the sideways corrections tried and how far the other part was pushed."""
+    ins = ev["insertion"]
+    force = f", contact force {ins['max_force_n']:.0f} N" if ins.get("max_force_n") is not None else ""
+    other = ""
+    if ins.get("other_moved_mm", 0.0) > 0.5 and ev.get("other"):
+        other = f"; {ev['other']} was pushed {ins['other_moved_mm']:.1f} mm"
+    return (
+        f"{ev['part']} jammed at {ins['depth_mm']:.1f} of {ins['length_mm']:.1f} mm depth{force} in "
+        f"{ev['label']!r} at {_t(ev)} ({ins['tries']} sideways corrections up to "
+        f"{float(np.linalg.norm(ins['correction_mm'])):.2f} mm did not free it: {ins['reason']}{other})"
+    )
+
+
 def failure_story(report: RunReport, split: dict[str, float] | None) -> tuple[str, FailureCause, dict[str, Any]]:
     """``(what happened, its cause, the evidence)`` for an assembly outside tolerance, from the trace's events.
 
@@ -129,14 +144,7 @@ def failure_story(report: RunReport, split: dict[str, float] | None) -> tuple[st
     note = _split_note(split)
     jams = [e for e in events if "insertion" in e and not e["insertion"].get("inserted", True)]
     if jams:
-        ev, ins = jams[-1], jams[-1]["insertion"]
-        force = f", contact force {ins['max_force_n']:.0f} N" if ins.get("max_force_n") is not None else ""
-        text = (
-            f"{ev['part']} jammed at {ins['depth_mm']:.1f} of {ins['length_mm']:.1f} mm depth{force} in "
-            f"{ev['label']!r} at {_t(ev)} ({ins['tries']} sideways corrections up to "
-            f"{float(np.linalg.norm(ins['correction_mm'])):.2f} mm did not free it: {ins['reason']})"
-        )
-        return text + note, FailureCause.JAM, {"event": _public(ev), **evidence}
+        return jam_note(jams[-1]) + note, FailureCause.JAM, {"event": _public(jams[-1]), **evidence}
     toppled = [e for e in events if e.get("toppled")]
     if toppled:
         ev = max(toppled, key=lambda e: e["tilted_deg"])

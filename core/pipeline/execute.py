@@ -15,6 +15,7 @@ from asmteach.core.arm.insertion import guarded_insert
 from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import Robot
 from asmteach.core.models import Plan, RunReport
+from asmteach.core.pipeline.causes import jam_note
 from asmteach.core.pipeline.monitor import ExecutionTrace, plan_parts
 from asmteach.core.pipeline.stage import Run, StageFailed
 
@@ -39,7 +40,7 @@ def execute_stage(run: Run, robot: Robot, plan: Plan, stage: str = "execute") ->
         for seg in plan.segments:
             if seg.trajectory is not None:
                 trace.before_path()
-                seconds = _insert(robot, seg, trace) if seg.kind == "insertion" else None
+                seconds = _insert(robot, seg, trace, run.report) if seg.kind == "insertion" else None
                 if seconds is None:
                     for chunk in _chunks(seg.trajectory, period if record else None):
                         robot.execute(chunk)
@@ -66,9 +67,10 @@ def execute_stage(run: Run, robot: Robot, plan: Plan, stage: str = "execute") ->
     return frames
 
 
-def _insert(robot: Robot, seg: Any, trace: ExecutionTrace) -> float | None:
+def _insert(robot: Robot, seg: Any, trace: ExecutionTrace, report: RunReport) -> float | None:
     """Run an insertion guarded (:func:`~asmteach.core.arm.insertion.guarded_insert`) when its arm holds a part;
-    the robot seconds it took, or None when the arm holds nothing (it runs as planned)."""
+    the robot seconds it took, or None when the arm holds nothing (it runs as planned). An insertion that
+    stops short fails the stage as a jam (depth, force, time)."""
     arm = seg.trajectory.arm
     part = trace.held.get(arm)
     if part is None:
@@ -77,6 +79,11 @@ def _insert(robot: Robot, seg: Any, trace: ExecutionTrace) -> float | None:
     q = np.asarray(seg.trajectory.positions)
     outcome = guarded_insert(robot, seg.trajectory, part, other)
     trace.insertion(seg.label, part, other, outcome, robot.fk(arm, q[0]), robot.fk(arm, q[-1]))
+    if not outcome.inserted:
+        # the plan goes on from the end of the insertion: the arm is not there, and the part is not in
+        ev = {k: v for k, v in trace.events[-1].items() if not k.startswith("T_")}
+        report.failure_details = {"event": ev}
+        raise StageFailed(jam_note(ev), details={"failure": {"event": ev}}, cause=FailureCause.JAM)
     return outcome.seconds
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from asmteach.core.models import GripperEvent, Plan, PlanSegment, Trajectory
 from asmteach.core.pipeline.monitor import ExecutionTrace, plan_parts
@@ -68,3 +69,29 @@ def test_the_plan_names_its_parts_in_order() -> None:
         ]
     )
     assert plan_parts(plan) == ["block", "peg"]
+
+
+def test_an_insertion_that_stops_short_fails_the_execute_stage_as_a_jam(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The plan goes on from where the insertion should have ended: the stage stops with the jam's evidence."""
+    from asmteach.core.arm.insertion import InsertionOutcome
+    from asmteach.core.failures import FailureCause
+    from asmteach.core.models import RunReport
+    from asmteach.core.pipeline import execute
+    from asmteach.core.pipeline.stage import StageFailed
+
+    world = _World()
+    trace = ExecutionTrace(world, ["block", "peg"], t0_s=40.0)  # type: ignore[arg-type]
+    trace.before_grip("close on peg", "a", True, "peg")
+    trace.after_grip("a", True, "peg")
+    stuck = InsertionOutcome(inserted=False, depth_m=0.006, length_m=0.015, reason="still resisted")
+    stuck.contacts = []
+    report = RunReport(config={}, seed=0)
+    seg = PlanSegment(label="insert peg at assembled", trajectory=_traj(1.0), kind="insertion")
+    monkeypatch.setattr(execute, "guarded_insert", lambda robot, traj, part, other: stuck)
+    with pytest.raises(StageFailed) as failed:
+        execute._insert(world, seg, trace, report)  # type: ignore[arg-type]
+    assert failed.value.cause is FailureCause.JAM
+    assert failed.value.reason.startswith(
+        "peg jammed at 6.0 of 15.0 mm depth in 'insert peg at assembled' at t = 40.0 s"
+    )
+    assert report.failure_details["event"]["insertion"]["depth_mm"] == 6.0
