@@ -33,7 +33,7 @@ from asmteach.core.convex_pieces import decompose
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
 
-__all__ = ["POSITION_GAIN", "PyBulletWorld", "pb_to_pose", "pose_to_pb"]
+__all__ = ["CONE_FRICTION", "POSITION_GAIN", "PyBulletWorld", "pb_to_pose", "pose_to_pb"]
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +51,15 @@ and a held part leaves a steady error of 0.3-1.3 mrad (0.2-0.4 mm at the TCP) ho
 such errors at the grasp of A and B and the release of A add up to more than a peg's 0.5 mm radial clearance in
 its hole (demo seeds 16, 25, 28 jammed). With 1.0 the arm settles within 0.1 mrad (0.02 mm), as an industrial
 position servo does."""
+
+
+CONE_FRICTION = False
+"""PyBullet's ``enableConeFriction``. Off: Bullet's pyramid friction, two tangent rows per contact each bounded by
+``mu * normal force`` (so up to ``sqrt(2) * mu * N`` on the diagonal), instead of the implicit cone. The cone's rows
+(an ``atan2`` and a ``sincos`` per contact per solver iteration) were half of the physics time of a demo trial: a
+held part's contacts and the 65 convex pieces of the holed block resting on the table (about 180 contact points)
+are solved at every one of the 240 steps a simulated second. Pyramid friction executes seed 1's plan in 9.8 s of
+CPU instead of 15.5 s, the assembly ending within the run-to-run spread (docs/results/cycle_time.md, Session 14)."""
 
 
 _EXACT_OBJ: dict[str, str] = {}
@@ -99,6 +108,7 @@ class PyBulletWorld:
         self.position_gain = float(position_gain)
         self.p.setTimeStep(self.time_step)
         self.p.setGravity(0.0, 0.0, -9.81)
+        self.p.setPhysicsEngineParameter(enableConeFriction=int(CONE_FRICTION))
         self.T_world_base = np.asarray(T_world_base, dtype=float)
         pos, orn = pose_to_pb(self.T_world_base)
         flags = pybullet.URDF_USE_INERTIA_FROM_FILE
