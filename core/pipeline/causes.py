@@ -124,7 +124,7 @@ def jam_note(ev: dict[str, Any]) -> str:
         other = f"; {ev['other']} was pushed {ins['other_moved_mm']:.1f} mm"
     return (
         f"{ev['part']} jammed at {ins['depth_mm']:.1f} of {ins['length_mm']:.1f} mm depth{force} in "
-        f"{ev['label']!r} at {_t(ev)} ({ins['tries']} sideways corrections up to "
+        f"{ev['label']!r} at {_t(ev)} (met resistance {ins['tries']} times; sideways corrections up to "
         f"{float(np.linalg.norm(ins['correction_mm'])):.2f} mm did not free it: {ins['reason']}{other})"
     )
 
