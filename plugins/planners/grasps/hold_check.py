@@ -22,7 +22,9 @@ friction follows from it and the pad size).
 
 from __future__ import annotations
 
+import tempfile
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pybullet
@@ -38,6 +40,13 @@ __all__ = ["HoldResult", "HoldSimulator"]
 _PAD_THICKNESS = 0.001
 _CLOSE_S = 0.6
 _SETTLE_S = 0.3
+_CLOSE_SPEED = 0.1
+"""Finger closing speed, m/s."""
+_CLOSE_STEP = 1e-4
+"""Most a finger moves per simulation step while it closes and the grip settles, metres. At 0.1 m/s and
+1/240 s a pad moved 0.42 mm per step, a sixth of a 2.5 mm plate: it met the plate already inside it, the
+solver (100 iterations over some 60 contacts of the pieces under one pad) did not push it back out, contacts
+stayed 2 mm deep and the jaws closed through: 8/15 pinches of a plate held, 15/15 at 1 ms steps."""
 _LIFT_S = 1.0
 
 
@@ -57,6 +66,24 @@ class HoldResult:
 
 def _quat(T: np.ndarray) -> list[float]:
     return geometry.to_quat(T).tolist()
+
+
+def _principal_inertia(part: PartModel, mass: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(R_part_inertia, moments)``: principal axes (columns, part frame) and moments (kg m^2) of the part's
+    inertia about its ``center_of_mass``, for its mesh filled uniformly to ``mass`` kilograms."""
+    mesh = part.mesh
+    volume = float(mesh.volume)
+    if not mesh.is_volume or volume <= 0.0:  # an open mesh has no inertia tensor: a solid box of its extents
+        e = np.asarray(mesh.extents, dtype=float)
+        return np.eye(3), mass / 12.0 * ((e**2).sum() - e**2)
+    # trimesh's tensor is about the mesh's own centre of mass at its density; the parallel-axis theorem moves it
+    d = np.asarray(part.center_of_mass, dtype=float) - np.asarray(mesh.center_mass, dtype=float)
+    own = np.asarray(mesh.moment_inertia, dtype=float) * (mass / float(mesh.mass))
+    inertia = own + mass * (d @ d * np.eye(3) - np.outer(d, d))
+    moments, axes = np.linalg.eigh(inertia)
+    if np.linalg.det(axes) < 0.0:  # a rotation, not a reflection
+        axes[:, 2] *= -1.0
+    return axes, np.maximum(moments, 1e-12)
 
 
 class HoldSimulator:
@@ -84,14 +111,17 @@ class HoldSimulator:
         # mass, which only makes holding them harder (more weight for the same friction).
         self.min_part_mass = float(min_part_mass)
         self.client = pybullet.connect(pybullet.DIRECT)
-        # the project's one convex decomposition (exact for solids and CAD meshes), as closed hulls
-        self.pieces = decompose(part).hulls()
+        # the project's one convex decomposition (exact for solids and CAD meshes), written once as OBJ
+        self._tmp = tempfile.TemporaryDirectory(prefix="asmteach_hold_")
+        self._obj_path = str(Path(self._tmp.name) / "pieces.obj")
+        Path(self._obj_path).write_text(decompose(part).obj(), encoding="utf-8")
 
     def close(self) -> None:
         """Disconnect the simulator."""
         if self.client >= 0:
             pybullet.disconnect(self.client)
             self.client = -1
+            self._tmp.cleanup()
 
     def __enter__(self) -> HoldSimulator:
         return self
@@ -101,43 +131,48 @@ class HoldSimulator:
 
     # ------------------------------------------------------------------ bodies
     def _spawn_part(self, T_world_part: np.ndarray) -> int:
+        """The part as ONE rigid body whose collision shape is the compound of its convex pieces.
+
+        A multibody with one fixed link per piece (how this check built parts before) lets the pads sink
+        through a thin part: on a 2.65 mm plate of 429 pieces the contacts were 2-4.5 mm deep 0.05 s into
+        the close, their normals flipping sign, and the jaws met inside the plate (equal link masses did
+        no better, so it is the articulation, not the slivers' tiny masses). One body with a compound
+        shape is what a rigid part is, and how :class:`asmteach.core.arm.sim.PyBulletWorld` spawns parts.
+        Its mass properties are the mesh's (uniform density), about the part's centre of mass.
+        """
         c = self.client
-        vols = np.array([max(float(p.volume), 1e-12) for p in self.pieces])
-        masses = max(self.part.mass, self.min_part_mass) * vols / vols.sum()
-        shapes, frames = [], []
-        for p in self.pieces:
-            centre = np.asarray(p.center_mass if p.is_volume else p.centroid, dtype=float)
-            verts = (np.asarray(p.vertices) - centre).tolist()
-            shapes.append(pybullet.createCollisionShape(pybullet.GEOM_MESH, vertices=verts, physicsClientId=c))
-            frames.append(centre)
-        T0 = T_world_part @ geometry.from_rotation(np.eye(3), frames[0])
-        n = len(shapes) - 1
+        mass = max(self.part.mass, self.min_part_mass)
+        com = np.asarray(self.part.center_of_mass, dtype=float)
+        R_part_inertia, principal = _principal_inertia(self.part, mass)
+        T_part_inertia = geometry.from_rotation(R_part_inertia, com)
+        # PyBullet makes one convex hull per object of an OBJ file: a compound of the pieces
+        shape = pybullet.createCollisionShape(pybullet.GEOM_MESH, fileName=self._obj_path, physicsClientId=c)
         body = pybullet.createMultiBody(
-            baseMass=float(masses[0]),
-            baseCollisionShapeIndex=shapes[0],
-            basePosition=T0[:3, 3].tolist(),
-            baseOrientation=_quat(T0),
-            linkMasses=[float(m) for m in masses[1:]],
-            linkCollisionShapeIndices=shapes[1:],
-            linkVisualShapeIndices=[-1] * n,
-            linkPositions=[(f - frames[0]).tolist() for f in frames[1:]],
-            linkOrientations=[[0, 0, 0, 1]] * n,
-            linkInertialFramePositions=[[0, 0, 0]] * n,
-            linkInertialFrameOrientations=[[0, 0, 0, 1]] * n,
-            linkParentIndices=[0] * n,
-            linkJointTypes=[pybullet.JOINT_FIXED] * n,
-            linkJointAxis=[[0, 0, 1]] * n,
+            baseMass=mass,
+            baseCollisionShapeIndex=shape,
+            basePosition=T_world_part[:3, 3].tolist(),
+            baseOrientation=_quat(T_world_part),
+            baseInertialFramePosition=com.tolist(),
+            baseInertialFrameOrientation=_quat(T_part_inertia),
             physicsClientId=c,
         )
-        for link in range(-1, n):
-            pybullet.changeDynamics(body, link, lateralFriction=1.0, spinningFriction=1.0, physicsClientId=c)
-        self._part_offset = frames[0]
+        # exact convex pieces collide without a margin (as PyBulletWorld's parts: its CONTACT_MARGIN)
+        pybullet.changeDynamics(
+            body,
+            -1,
+            lateralFriction=1.0,
+            spinningFriction=1.0,
+            localInertiaDiagonal=principal.tolist(),
+            collisionMargin=0.0,
+            physicsClientId=c,
+        )
+        self._T_part_inertia = T_part_inertia
         return body
 
     def _part_pose(self, body: int) -> np.ndarray:
         pos, orn = pybullet.getBasePositionAndOrientation(body, physicsClientId=self.client)
-        T_world_base = geometry.from_quat(orn, pos)
-        return T_world_base @ geometry.from_rotation(np.eye(3), -self._part_offset)
+        # PyBullet reports the inertial frame's pose
+        return geometry.from_quat(orn, pos) @ geometry.invert(self._T_part_inertia)
 
     def _spawn_gripper(self, T_world_tcp: np.ndarray, opening: float) -> int:
         c = self.client
@@ -220,7 +255,10 @@ class HoldSimulator:
         """Run one lift-and-shake trial of ``grasp`` (part frame) and report whether the part stayed held."""
         c = self.client
         pybullet.resetSimulation(physicsClientId=c)
-        pybullet.setPhysicsEngineParameter(fixedTimeStep=self.dt, numSolverIterations=100, physicsClientId=c)
+        # a finer step while the fingers close and the grip settles (see _CLOSE_STEP); the lift and shake,
+        # with the pads already resting on the part, run at ``timestep``
+        close_dt = min(self.dt, _CLOSE_STEP / _CLOSE_SPEED)
+        pybullet.setPhysicsEngineParameter(fixedTimeStep=close_dt, numSolverIterations=100, physicsClientId=c)
         pybullet.setGravity(0, 0, 0, physicsClientId=c)
         # Top-down: TCP z along world -z, jaw axis along world x, TCP 0.5 m up.
         R_world_tcp = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -238,11 +276,12 @@ class HoldSimulator:
         for j in (0, 1):
             pybullet.setJointMotorControl2(
                 gripper, j, pybullet.POSITION_CONTROL, targetPosition=0.0,
-                force=self.hand.max_force, maxVelocity=0.1, physicsClientId=c,
+                force=self.hand.max_force, maxVelocity=_CLOSE_SPEED, physicsClientId=c,
             )  # fmt: skip
-        self._run(_CLOSE_S)
+        self._run(_CLOSE_S, close_dt)
         pybullet.setGravity(0, 0, -9.81, physicsClientId=c)
-        self._run(_SETTLE_S)
+        self._run(_SETTLE_S, close_dt)
+        pybullet.setPhysicsEngineParameter(fixedTimeStep=self.dt, physicsClientId=c)
         T_tcp_part0 = geometry.invert(T_world_tcp) @ self._part_pose(part)
         z0 = self._part_pose(part)[2, 3]
         start = T_world_tcp[:3, 3].copy()
@@ -301,6 +340,6 @@ class HoldSimulator:
             physicsClientId=self.client,
         )
 
-    def _run(self, seconds: float) -> None:
-        for _ in range(round(seconds / self.dt)):
+    def _run(self, seconds: float, dt: float) -> None:
+        for _ in range(round(seconds / dt)):
             pybullet.stepSimulation(physicsClientId=self.client)
