@@ -61,6 +61,11 @@ held part's contacts and the 65 convex pieces of the holed block resting on the 
 are solved at every one of the 240 steps a simulated second. Pyramid friction executes seed 1's plan in 9.8 s of
 CPU instead of 15.5 s, the assembly ending within the run-to-run spread (docs/results/cycle_time.md, Session 14)."""
 
+STALL_RAD_PER_STEP = 1e-6
+"""A joint moving less than this per physics step (radians; 0.24 mrad/s at 240 Hz) is not moving."""
+STALL_STEPS = 12
+"""Settling stops after this many steps (0.05 s at 240 Hz) with no joint moving: the arm is held short of its goal."""
+
 
 _EXACT_OBJ: dict[str, str] = {}
 """OBJ text of a parametric part's exact convex pieces, by part hash."""
@@ -294,11 +299,21 @@ class PyBulletWorld:
                 motor(robot, j, mode, targetPosition=x, force=f, maxVelocity=v, positionGain=gain)
             step()
         goal = positions[-1]
+        # Settle until the joints reach the goal, or until they have stalled short of it: an arm pressing a part
+        # against resistance (a guarded insertion's probe) never reaches ``tol``, and waiting the whole ``settle``
+        # there cost a second of simulation per probe. Free of contact, the servo closes a share of the error per
+        # step, far above the stall threshold until the error is well under ``tol``.
+        q_prev, still = self.get_joints(names), 0
         for _ in range(int(settle / self.time_step)):
-            if np.max(np.abs(self.get_joints(names) - goal)) < tol:
+            if np.max(np.abs(q_prev - goal)) < tol:
                 break
-            self.p.stepSimulation()
-        return self.get_joints(names)
+            step()
+            q = self.get_joints(names)
+            still = still + 1 if np.max(np.abs(q - q_prev)) < STALL_RAD_PER_STEP else 0
+            q_prev = q
+            if still >= STALL_STEPS:
+                break
+        return q_prev
 
     def close(self) -> None:
         try:
