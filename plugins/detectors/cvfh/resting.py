@@ -38,7 +38,8 @@ from scipy.spatial.transform import Rotation
 import asmteach.core  # noqa: F401  (loads libusb before open3d)
 from asmteach.core import geometry
 from asmteach.core.models import TablePlane
-from asmteach.core.perception.registration import ModelCloud, ray_depths
+from asmteach.core.perception.registration import ModelCloud
+from asmteach.core.perception.surface_check import ray_depths
 from asmteach.core.rests.placements import plan_placements, resting_poses
 from asmteach.core.symmetry import part_symmetries
 

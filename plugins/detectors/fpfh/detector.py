@@ -32,7 +32,6 @@ from asmteach.core.perception.registration import (
     Verdict,
     icp_refine,
     model_cloud,
-    ray_plane,
     verify,
 )
 from asmteach.core.perception.segmentation import (
@@ -42,6 +41,7 @@ from asmteach.core.perception.segmentation import (
     merge_nearby,
     remove_table,
 )
+from asmteach.core.perception.surface_check import ray_plane
 from asmteach.core.perception.viewpoint import StageClock, resolve_viewpoint
 
 import open3d as o3d  # isort: skip
@@ -309,7 +309,7 @@ def _along_rays(points: np.ndarray, context: np.ndarray, eye: np.ndarray, s: Ref
     """(coverage, contradicted) of model ``points`` (world) against the seen ``context`` along rays from ``eye``.
 
     Each point's nearest observed ray within ``s.ray_radius`` (rays as points of a plane 1 m in front of
-    the eye, as :func:`~asmteach.core.perception.registration.surface_check` does); points without one,
+    the eye, as :func:`~asmteach.core.perception.surface_check.surface_check` does); points without one,
     or hidden by something nearer, give no evidence. ``(0, 1)`` when nothing can be judged.
     """
     from scipy.spatial import cKDTree

@@ -21,10 +21,9 @@ from asmteach.core.perception.registration import (
     RefineSettings,
     _free_space_violation,
     model_cloud,
-    ray_depths,
-    surface_check,
     verify,
 )
+from asmteach.core.perception.surface_check import ray_depths, surface_check
 from asmteach.core.rests.drops import drop_rests
 from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
 from asmteach.plugins.detectors.cvfh.prescore import SampleIndex, near_shares

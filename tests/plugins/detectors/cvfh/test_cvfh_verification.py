@@ -14,7 +14,8 @@ from asmteach.core.interfaces import PartModel
 from asmteach.core.models import TablePlane
 from asmteach.core.parts import PartSpec, build_part
 from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
-from asmteach.core.perception.registration import RefineSettings, icp_refine, model_cloud, surface_check, verify
+from asmteach.core.perception.registration import RefineSettings, icp_refine, model_cloud, verify
+from asmteach.core.perception.surface_check import surface_check
 from asmteach.core.rests.drops import drop_rests
 from asmteach.core.symmetry import part_symmetries
 from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
