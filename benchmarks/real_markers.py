@@ -37,7 +37,7 @@ from asmteach.plugins.detectors.aruco.calibrate import ChessboardSpec, calibrate
 from asmteach.plugins.detectors.aruco.camera import load_camera
 from asmteach.plugins.detectors.aruco.detect import MarkerDetector
 from asmteach.plugins.detectors.aruco.frames import load_named_frames
-from asmteach.plugins.detectors.aruco.teacher import ArucoTeacherSettings
+from asmteach.plugins.detectors.aruco.teacher_settings import ArucoTeacherSettings
 
 ROOT = Path(__file__).resolve().parents[1]
 SQUARE, MARKER, DICT = 0.04, 0.02, "DICT_6X6_250"

@@ -28,7 +28,7 @@ from asmteach.core.pose_error import PoseError, pose_error
 from asmteach.plugins.detectors.aruco.markers import get_dictionary, marker_corners_part
 
 if TYPE_CHECKING:
-    from asmteach.plugins.detectors.aruco.teacher import ArucoTeacherSettings
+    from asmteach.plugins.detectors.aruco.teacher_settings import ArucoTeacherSettings
 
 __all__ = ["SplitEstimate", "charuco_marker_poses", "solvepnp_split", "split_board_task", "teacher_split"]
 
@@ -94,7 +94,8 @@ def teacher_split(image: np.ndarray, camera: CameraIntrinsics, task: AssemblyTas
     """``T_A_B`` from one photo the way the ArUco teacher sees each frame (:meth:`.ArucoTeacher.observe`:
     its detector and corner refinement, then :func:`.pnp.solve_part_pose`, one multi-marker PnP per part).
     ``ValueError`` when a group gets no pose."""
-    from asmteach.plugins.detectors.aruco.teacher import ArucoTeacher, ArucoTeacherSettings
+    from asmteach.plugins.detectors.aruco.teacher import ArucoTeacher
+    from asmteach.plugins.detectors.aruco.teacher_settings import ArucoTeacherSettings
 
     teacher = ArucoTeacher(settings or ArucoTeacherSettings(), seed=0)
     r = teacher.observe([image], camera, task)[0]

@@ -24,16 +24,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydantic import Field
 
 from asmteach.core import geometry
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Teacher
-from asmteach.core.models import AssemblyTask, CameraIntrinsics, StrictModel, TeachingEvidence
+from asmteach.core.models import AssemblyTask, CameraIntrinsics, TeachingEvidence
 from asmteach.core.parts import build_part
 from asmteach.plugins.detectors.aruco.approach import refit_with_rotation
 from asmteach.plugins.detectors.aruco.branches import follow_branch
-from asmteach.plugins.detectors.aruco.detect import MarkerDetector, RefineMethod
+from asmteach.plugins.detectors.aruco.detect import MarkerDetector
 from asmteach.plugins.detectors.aruco.fusion import fuse_poses
 from asmteach.plugins.detectors.aruco.insertion import (
     check_retreat,
@@ -45,52 +44,9 @@ from asmteach.plugins.detectors.aruco.joint import CornerSet, adjust, frame_rms
 from asmteach.plugins.detectors.aruco.markers import MarkerRef, marker_table
 from asmteach.plugins.detectors.aruco.pnp import MarkerObservation, PartPose, solve_part_pose
 from asmteach.plugins.detectors.aruco.scene import DemoSettings
+from asmteach.plugins.detectors.aruco.teacher_settings import ArucoTeacherSettings
 
-__all__ = ["ArucoTeacher", "ArucoTeacherSettings", "FrameResult"]
-
-
-class ArucoTeacherSettings(StrictModel):
-    """Settings of the ``aruco`` teacher (lengths in metres, angles in degrees, errors in pixels)."""
-
-    corner_refinement: RefineMethod = Field("edges", description="edges: line fits to the marker's outer edges")
-    edge_max_line_rms: float = Field(
-        0.25,
-        gt=0,
-        description="edges: a marker side whose edge points scatter more "
-        "than this (pixels RMS) about its line, or more than 2.5 times the edge-point "
-        "noise measured on the marker's own sides if that is larger, is not trusted "
-        "(marker dropped)",
-    )
-    edge_min_inliers: float = Field(
-        0.85,
-        gt=0,
-        le=1,
-        description="edges: fraction of a side's edge profiles that "
-        "must be clean steps (docs/results/real_sensor_data.md, section 2: a real "
-        "JPEG's small markers fail this on some sides)",
-    )
-    marker_reject_px: float = Field(1.0, gt=0, description="drop a marker whose RMS reprojection error exceeds this")
-    frame_reject_px: float = Field(1.0, gt=0, description="drop a frame whose RMS reprojection error exceeds this")
-    min_frames: int = Field(3, ge=1, description="assembled frames needed (both parts seen)")
-    assembled_radius: float = Field(0.004, gt=0, description="B-in-A positions this close form the assembled cluster")
-    assembled_angle_deg: float = Field(4.0, gt=0, description="... and rotations this close")
-    fusion_k: float = Field(3.0, gt=0, description="outlier threshold of the fusion, robust standard deviations")
-    joint_refine: bool = Field(True, description="joint LM adjustment of T_A_B over all kept frames")
-    joint_reject_px: float = Field(
-        0.3, gt=0, description="joint adjustment drops frames whose RMS exceeds this and four times the median"
-    )
-    min_approach_frames: int = Field(3, ge=2, description="approach frames needed to learn v_a")
-    min_approach_travel: float = Field(0.01, gt=0, description="B must travel this far toward A to learn v_a")
-    check_insertion: bool = Field(True, description="check v_a with python-fcl; fall back to geometry if it fails")
-    retract: float = Field(0.5, gt=0, description="retreat distance of the check along -v_a, metres")
-    snap_cone_deg: float = Field(
-        6.0,
-        gt=0,
-        le=30,
-        description="a learned v_a failing the check moves to the free retreat directions within this cone, degrees",
-    )
-    collision_tolerance: float = Field(5e-4, ge=0, description="meshes shrunk by this for contact checks, metres")
-    threads: int | None = Field(None, ge=1, description="detection threads (default: all cores)")
+__all__ = ["ArucoTeacher", "FrameResult"]
 
 
 @dataclass

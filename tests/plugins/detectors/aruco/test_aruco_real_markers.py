@@ -28,7 +28,7 @@ from asmteach.plugins.detectors.aruco.boards import (
 from asmteach.plugins.detectors.aruco.camera import load_camera
 from asmteach.plugins.detectors.aruco.detect import MarkerDetector
 from asmteach.plugins.detectors.aruco.markers import get_dictionary
-from asmteach.plugins.detectors.aruco.teacher import ArucoTeacherSettings
+from asmteach.plugins.detectors.aruco.teacher_settings import ArucoTeacherSettings
 
 REAL_PHOTO = ArucoTeacherSettings(edge_max_line_rms=0.35, edge_min_inliers=0.6)
 SPLITS = {"left/right": (0, 0.08), "left/right 3+2": (0, 0.12), "top/bottom": (1, 0.12), "top/bottom 4+3": (1, 0.16)}
