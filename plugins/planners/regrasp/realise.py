@@ -344,7 +344,8 @@ def realise_keyframes(
                 continue
             free(arm, q_cur[arm], home, (nodes[-1], GOAL), f"{arm} arm back home", f"{arm} arm home")
             q_cur[arm] = home
-        end = _Scene(extra, None, dict(q_set))
+        # the plan ends with every arm where its last motion leaves it (home), not where the loop last set it
+        end = _Scene(extra, None, {arm: q.copy() for arm, q in q_cur.items()})
         # second pass: the motion planner, in the order the robot moves
         clearances: list[float] = []
         for m in queries:

@@ -308,9 +308,10 @@ class _CountingPlanner:
 
 @pytest.mark.slow
 def test_keyframe_sequences_failing_at_a_straight_line_never_reach_the_motion_planner() -> None:
-    """Notched block, seed 0: eight of B's keyframe sequences end in an insertion whose fingers meet A, and
-    one of each part's carries ends in collision. Lines and ends are checked before any free motion is
-    planned, so the motion planner sees only the free motions of the plan that succeeds."""
+    """Notched block, seed 0: one of A's carries ends in collision. Lines and ends are checked before any free
+    motion is planned, so the motion planner sees only the free motions of the plan that succeeds. (Before the
+    goal screen checked the hand closed at the grasp width, session 14, eight and then one of B's sequences also
+    ended in an insertion whose fingers met A; the screen now removes those grasps before any sequence.)"""
     with random_scene("configs/parts/set1/notched_block.yaml", 0) as (robot, problem):
         motion = _CountingPlanner(registry.create("motion_planners", "trrt", {}, seed=0))
         messages: list[str] = []
@@ -318,8 +319,6 @@ def test_keyframe_sequences_failing_at_a_straight_line_never_reach_the_motion_pl
             problem, robot, motion, progress=messages.append
         )
         assert res.success, res.reason
-        # with the soft-pad grasp set (session 11) one of B's sequences meets A at its insertion (eight before)
-        assert sum("insertion at assembled: collision" in m for m in messages) >= 1
         assert any("goal in collision" in m for m in messages)
         free = [
             s
