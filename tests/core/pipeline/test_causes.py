@@ -118,6 +118,21 @@ def _T(xyz: tuple[float, float, float], yaw_deg: float = 0.0) -> np.ndarray:
     return T
 
 
+def _inserted(T_end: np.ndarray, T_tcp_part: np.ndarray, T_world_other: np.ndarray) -> dict:
+    """A guarded insertion that got in: a 30 mm straight-down TCP line ending at ``T_end``."""
+    T_start = T_end.copy()
+    T_start[2, 3] += 0.03
+    return {
+        "label": "insert p",
+        "part": "p",
+        "insertion": {"inserted": True},
+        "T_world_tcp_start": T_start.tolist(),
+        "T_world_tcp_end": T_end.tolist(),
+        "T_tcp_part": T_tcp_part.tolist(),
+        "T_world_other": T_world_other.tolist(),
+    }
+
+
 def test_the_insertion_error_is_split_into_grasp_placement_and_teaching() -> None:
     """A peg inserted straight down: the hand holds it 0.3 mm off in x, A stands 0.2 mm off its goal in y,
     the taught seat is 0.4 mm off the true one in x; a 5 mm error along the insertion line is no error."""
@@ -131,18 +146,7 @@ def test_the_insertion_error_is_split_into_grasp_placement_and_teaching() -> Non
     # the TCP 100 mm above the part, pointing down; the plan aims the part at A's goal @ taught
     T_tcp_part = _T((0.0, 0.0, -0.1))
     T_tcp_part[:3, 3] += [0.0003, 0.0, 0.0]  # held 0.3 mm off in x
-    T_end = a_goal @ taught @ np.linalg.inv(_T((0.0, 0.0, -0.1)))
-    T_start = T_end.copy()
-    T_start[2, 3] += 0.03
-    ev = {
-        "label": "insert p",
-        "part": "p",
-        "insertion": {"inserted": True},
-        "T_world_tcp_start": T_start.tolist(),
-        "T_world_tcp_end": T_end.tolist(),
-        "T_tcp_part": T_tcp_part.tolist(),
-        "T_world_other": a_now.tolist(),
-    }
+    ev = _inserted(a_goal @ taught @ np.linalg.inv(_T((0.0, 0.0, -0.1))), T_tcp_part, a_now)
     split = insertion_error(_report(ev), learned, true_task, a_goal)
     assert split is not None
     assert abs(split["grasp_mm"] - 0.3) < 1e-6
@@ -166,18 +170,7 @@ def test_a_symmetric_a_standing_in_its_twin_pose_splits_as_in_the_pose_nearest_i
     flip[2, 3] = 0.03  # the block's frame at its bottom face: turned over, the frame sits 30 mm up
     a_goal = _T((0.4, 0.0, 0.0))
     T_tcp_part = _T((0.0, 0.0, -0.1))
-    T_end = a_goal @ seat @ np.linalg.inv(T_tcp_part)
-    T_start = T_end.copy()
-    T_start[2, 3] += 0.03
-    ev = {
-        "label": "insert p",
-        "part": "p",
-        "insertion": {"inserted": True},
-        "T_world_tcp_start": T_start.tolist(),
-        "T_world_tcp_end": T_end.tolist(),
-        "T_tcp_part": T_tcp_part.tolist(),
-        "T_world_other": (a_goal @ flip).tolist(),
-    }
+    ev = _inserted(a_goal @ seat @ np.linalg.inv(T_tcp_part), T_tcp_part, a_goal @ flip)
     plain = insertion_error(_report(ev), task, task, a_goal)
     assert plain is not None and plain["a_place_deg"] > 179.0
     split = insertion_error(_report(ev), task, task, a_goal, [np.eye(4), np.linalg.inv(flip)])
