@@ -358,16 +358,33 @@ class CvfhIcpDetector(Detector):
 
 
 def _width(points: np.ndarray) -> float:
-    """Diagonal of a cluster's bounding box aligned with its principal axes in the table plane, metres.
+    """Diagonal of a cluster's tightest box standing on the table (metres): the minimum-area rectangle of its
+    footprint (x, y) and its height (z).
 
-    A world-axis-aligned box would grow by up to sqrt(2) for a part turned 45 deg
-    about the table normal and reject it as too wide.
+    A world-axis-aligned box would grow by up to sqrt(2) for a part turned 45 deg about the table normal; so
+    would a box on the footprint's principal axes for a near-square footprint, whose axes are undefined (a
+    54 x 52 mm block measured 75 x 77 mm, wider than the size check allows, and was never tried). The tightest
+    rectangle has a side along an edge of the footprint's convex hull (rotating calipers).
     """
     xy = points[:, :2] - points[:, :2].mean(axis=0)
-    if len(xy) >= 3:
-        _, vecs = np.linalg.eigh(xy.T @ xy)
-        xy = xy @ vecs
-    return float(np.linalg.norm([*np.ptp(xy, axis=0), np.ptp(points[:, 2])]))
+    height = float(np.ptp(points[:, 2]))
+    if len(xy) < 3:
+        return float(np.linalg.norm([*np.ptp(xy, axis=0), height])) if len(xy) else 0.0
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        hull = xy[ConvexHull(xy).vertices]
+    except QhullError:  # collinear footprint: its box is the segment itself
+        hull = xy
+    edges = np.roll(hull, -1, axis=0) - hull
+    angles = np.arctan2(edges[:, 1], edges[:, 0])
+    c, s = np.cos(angles), np.sin(angles)
+    # each hull vertex in the frame of each edge: (edges, vertices)
+    u = c[:, None] * hull[None, :, 0] + s[:, None] * hull[None, :, 1]
+    v = -s[:, None] * hull[None, :, 0] + c[:, None] * hull[None, :, 1]
+    du, dv = np.ptp(u, axis=1), np.ptp(v, axis=1)
+    i = int(np.argmin(du * dv))
+    return float(np.linalg.norm([du[i], dv[i], height]))
 
 
 def _up_for(direction: np.ndarray) -> np.ndarray:

@@ -160,3 +160,26 @@ def test_known_table_is_used_and_nan_rows_ignored(
     assert det.found, det.reason
     assert geometry.translation_distance(det.rough, scene.T_world_part) < 0.003
     assert det.details["table"]["height"] == 0.0
+
+
+@pytest.mark.parametrize("yaw_deg", [0.0, 17.0, 38.0, 45.0, 71.0])
+def test_cluster_width_is_the_tightest_box_at_any_yaw(yaw_deg: float) -> None:
+    """A near-square footprint (54 x 52 mm, 24 mm high) measures its own diagonal at every yaw: its principal
+    axes are undefined, and a box on them measured up to the footprint's diagonal on each side (110 mm, beyond
+    the size check of the 79 mm part), so the block's cluster was never tried."""
+    from asmteach.plugins.detectors.cvfh.detector import _width
+
+    rng = np.random.default_rng(3)
+    box = rng.uniform([-0.027, -0.026, 0.0], [0.027, 0.026, 0.024], (3000, 3))
+    box[:, :2] += rng.normal(0.0, 0.0005, (3000, 2))  # a Kinect's edge noise
+    c, s = np.cos(np.radians(yaw_deg)), np.sin(np.radians(yaw_deg))
+    turned = box @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) + [0.4, -0.2, 0.0]
+    assert _width(turned) == pytest.approx(np.linalg.norm([0.054, 0.052, 0.024]), abs=0.004)
+
+
+def test_cluster_width_of_degenerate_clusters() -> None:
+    from asmteach.plugins.detectors.cvfh.detector import _width
+
+    line = np.column_stack([np.linspace(0.0, 0.03, 5), np.linspace(0.0, 0.04, 5), np.zeros(5)])
+    assert _width(line) == pytest.approx(0.05, abs=1e-9)
+    assert _width(line[:2]) == pytest.approx(0.0125, abs=1e-9)
