@@ -69,11 +69,11 @@ class InsertionStability:
 
     @property
     def slides(self) -> bool:
-        return self.slide_margin_n < 0.0
+        return bool(self.slide_margin_n < 0.0)
 
     @property
     def tips(self) -> bool:
-        return self.tip_margin_nm < 0.0
+        return bool(self.tip_margin_nm < 0.0)
 
     @property
     def holds(self) -> bool:
@@ -96,11 +96,11 @@ class InsertionStability:
             "slides": self.slides,
             "tips": self.tips,
             "holds": self.holds,
-            "slide_margin_n": round(self.slide_margin_n, 3),
-            "tip_margin_nmm": round(1000.0 * self.tip_margin_nm, 2),
-            "resists_n": round(self.resists_n, 2) if np.isfinite(self.resists_n) else None,
-            "mass_kg": round(self.mass_kg, 4),
-            "friction": self.friction,
+            "slide_margin_n": round(float(self.slide_margin_n), 3),
+            "tip_margin_nmm": round(1000.0 * float(self.tip_margin_nm), 2),
+            "resists_n": round(float(self.resists_n), 2) if np.isfinite(self.resists_n) else None,
+            "mass_kg": round(float(self.mass_kg), 4),
+            "friction": float(self.friction),
         }
 
 
@@ -154,9 +154,9 @@ def insertion_stability(
     return InsertionStability(
         force_n=float(force_n),
         direction=d,
-        slide_margin_n=slide0 - f * slide_per_n,
+        slide_margin_n=float(slide0 - f * slide_per_n),
         tip_margin_nm=float(np.min(tip0 - f * tip_per_n)),
-        resists_n=max(0.0, min(limits)) if limits else float("inf"),
+        resists_n=float(max(0.0, min(limits))) if limits else float("inf"),
         mass_kg=m,
         friction=float(friction),
     )

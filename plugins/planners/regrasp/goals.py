@@ -17,6 +17,10 @@ off the hole's axis where it enters (0.87 deg of teaching noise: 0.38 mm at a
 normal is within a degree or two of the insertion, but not along it, is not a
 design anyone makes.
 
+A must stay put while B goes in: a sideways insertion pushes it across the table with up to the guarded
+insertion's force limit (:func:`a_under_insertion`); the placements where it resists rank before those
+where it would slide or tip (else A needs holding: a jig, reported as such).
+
 B must also stay where it is let go: a slider in a through slot stood on
 end slides down out of it, and a peg in a blind hole deeper than its
 insertion drops to the bottom. :func:`slides_out` tells such placements
@@ -34,15 +38,18 @@ from dataclasses import dataclass, replace
 import numpy as np
 import trimesh
 
+from asmteach.core.arm.insertion import InsertionSettings
 from asmteach.core.errors import UserError
 from asmteach.core.geometry import compose, from_rotation, rot_z, transform_points
 from asmteach.core.interfaces import PartModel
 from asmteach.core.models import AssemblyTask, Placement
+from asmteach.core.rests.insertion_load import InsertionStability, insertion_stability
 
 __all__ = [
     "CLEAR_MARGIN",
     "VERTICAL_SNAP",
     "AssemblyGoal",
+    "a_under_insertion",
     "assembly_goal_at",
     "choose_assembly_goal",
     "clear_retraction",
@@ -69,6 +76,8 @@ class AssemblyGoal:
     """Stable placement of A used at the goal."""
     held: bool = True
     """B stays in A under gravity once let go (:func:`slides_out` is False)."""
+    a_load: InsertionStability | None = None
+    """What B's insertion, pushing with the guarded insertion's force limit, does to A (:func:`a_under_insertion`)."""
 
 
 def ranked_assembly_goals(
@@ -84,8 +93,8 @@ def ranked_assembly_goals(
     vertical_snap: float = VERTICAL_SNAP,
 ) -> list[AssemblyGoal]:
     """A's goal at each of its placements at ``xy`` (metres) turned by ``yaw`` (radians) about the table normal,
-    best first: B held in A under gravity (:func:`slides_out`), then insertion most nearly straight down, then
-    the likelier placement.
+    best first: B held in A under gravity (:func:`slides_out`), then A resisting B's insertion unheld
+    (:func:`a_under_insertion`), then insertion most nearly straight down, then the likelier placement.
 
     ``v_world`` is ``R_world_A @ v_a``, or exactly ``(0, 0, -1)`` when that is
     within ``vertical_snap`` radians of it (0 turns the snap off). Placements
@@ -104,8 +113,9 @@ def ranked_assembly_goals(
         if low_b < table_height - 1e-4:
             continue
         held = not slides_out(part_a, part_b, goal.T_world_a, goal.T_world_b, goal.v_world, table_height)
-        goal = replace(goal, held=held)
-        ranked.append((2.0 * held + float(-goal.v_world[2]) + 0.05 * p.probability, goal))
+        goal = replace(goal, held=held, a_load=a_under_insertion(part_a, part_b, goal))
+        stays = goal.a_load.holds
+        ranked.append((8.0 * held + 4.0 * stays + float(-goal.v_world[2]) + 0.05 * p.probability, goal))
     if not ranked:
         raise UserError(
             f"no stable placement of {part_a.name} keeps {part_b.name} above the table when assembled; "
@@ -165,6 +175,17 @@ def assembly_goal_at(
     T_pre = T_b.copy()
     T_pre[:3, 3] -= max(retract, clear_retraction(part_a, part_b, T_a, T_b, v_w)) * v_w
     return AssemblyGoal(T_a, T_b, T_pre, v_w, placement_id)
+
+
+def a_under_insertion(
+    part_a: PartModel, part_b: PartModel, goal: AssemblyGoal, force_n: float | None = None
+) -> InsertionStability:
+    """Whether A, resting at ``goal.T_world_a``, stays put while B is pushed in along ``goal.v_world`` with
+    ``force_n`` newtons (default: the guarded insertion's force limit, the most it pushes before it backs off)
+    bearing on A at B's assembled centre of mass (world, metres)."""
+    force = InsertionSettings().force_limit_n if force_n is None else float(force_n)
+    com_b = transform_points(goal.T_world_b, np.asarray(part_b.center_of_mass, float)[None])[0]
+    return insertion_stability(part_a, goal.T_world_a, goal.v_world, force, com_b)
 
 
 CLEAR_MARGIN = 0.005

@@ -39,11 +39,17 @@ from asmteach.core.interfaces import (
     Robot,
 )
 from asmteach.core.models import Plan
+from asmteach.core.rests.insertion_load import seat_friction_n
 from asmteach.core.rests.placements import compute_placements
 from asmteach.core.robot import PlanningScene
 from asmteach.core.symmetry import part_symmetries
 from asmteach.plugins.planners.regrasp.assembly import TransferResult, feasible_grasps_at, plan_transfer
-from asmteach.plugins.planners.regrasp.goals import AssemblyGoal, assembly_goal_at, ranked_assembly_goals
+from asmteach.plugins.planners.regrasp.goals import (
+    AssemblyGoal,
+    a_under_insertion,
+    assembly_goal_at,
+    ranked_assembly_goals,
+)
 from asmteach.plugins.planners.regrasp.graph import PoseSlot
 from asmteach.plugins.planners.regrasp.plan_io import render_regrasp_graph, table_obstacle, to_plan
 from asmteach.plugins.planners.regrasp.realise import PlaceGoal
@@ -102,7 +108,10 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
             "v_world": goal.v_world.tolist(),
             "goal_grasps_b": goal_grasps,
             "goal_holds_b": goal.held,  # False: B would slide out of A there (no goal holding it has grasps)
+            "a_under_insertion": _a_load(a, b, goal),
         }
+        if progress and not details["a_under_insertion"]["holds"]:
+            progress(f"{a.name} at its goal {details['a_under_insertion']['summary']}: it needs holding")
         result = AssemblyResult(
             False, Plan(), T_world_a_goal=goal.T_world_a, T_world_b_goal=goal.T_world_b, details=details
         )
@@ -141,6 +150,7 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
             result.plan = self._timed(robot, [("A", a.name, res_a)], t0)
             return self._fail(result, res_b, f"part B ({b.name})", t0, robot, keep_plan=True)
         result.plan = self._timed(robot, [("A", a.name, res_a), ("B", b.name, res_b)], t0)
+        result.plan.stats["a_under_insertion"] = details["a_under_insertion"]
         result.success, result.scene = True, res_b.scene
         return result
 
@@ -227,7 +237,10 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
             Plan(),
             T_world_a_goal=goal.T_world_a,
             T_world_b_goal=goal.T_world_b,
-            details={"v_world": goal.v_world.tolist()},
+            details={
+                "v_world": goal.v_world.tolist(),
+                "a_under_insertion": _a_load(problem.part_a, problem.part_b, goal),
+            },
         )
         scene = robot.scene if scene is None else scene
         q_now = {arm: np.array(scene.configuration[arm], dtype=float) for arm in robot.arms}
@@ -236,6 +249,7 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
         if not res_b.success:
             return self._fail(result, res_b, f"part B ({problem.part_b.name})", t0, robot)
         result.plan = self._timed(robot, [("B", problem.part_b.name, res_b)], t0)
+        result.plan.stats["a_under_insertion"] = result.details["a_under_insertion"]
         result.success, result.scene = True, res_b.scene
         return result
 
@@ -326,3 +340,15 @@ class RegraspAssemblyPlanner(AssemblyPlanner):
                     title=f"regrasp graph of part {key.upper()}",
                 )
         return out
+
+
+def _a_load(a: PartModel, b: PartModel, goal: AssemblyGoal) -> dict:
+    """What B's insertion does to A at ``goal`` (plan stats, report): :func:`a_under_insertion` at the guarded
+    insertion's force limit, with A's name, a one-line summary and B's seat friction (newtons)."""
+    load = goal.a_load if goal.a_load is not None else a_under_insertion(a, b, goal)
+    return {
+        "part": a.name,
+        **load.as_dict(),
+        "seat_friction_n": round(seat_friction_n(b.mass), 3),
+        "summary": load.summary(),
+    }

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import trimesh
@@ -68,3 +70,8 @@ def test_a_tall_narrow_block_tips_before_it_slides() -> None:
 
 def test_seat_friction_is_b_weight_times_friction() -> None:
     assert seat_friction_n(0.05, 1.0) == pytest.approx(0.05 * GRAVITY)
+
+
+def test_the_verdict_is_plain_json() -> None:
+    s = insertion_stability(_block((0.06, 0.04, 0.02), 0.2), np.eye(4), [-1.0, 0.0, 0.0], 20.0, [0.0, 0.0, 0.01])
+    assert json.loads(json.dumps(s.as_dict()))["slides"] is True  # numpy scalars would not serialise

@@ -12,7 +12,7 @@ from asmteach.core import geometry
 from asmteach.core.models import AssemblyTask, PartSpec, Primitive, SolidSpec
 from asmteach.core.parts import build_part
 from asmteach.core.rests.placements import compute_placements
-from asmteach.plugins.planners.regrasp.goals import ranked_assembly_goals, slides_out
+from asmteach.plugins.planners.regrasp.goals import a_under_insertion, ranked_assembly_goals, slides_out
 
 DOWN = np.array([0.0, 0.0, -1.0])
 
@@ -63,3 +63,20 @@ def test_goals_where_b_is_held_come_first(block) -> None:
     assert held[0] and not all(held) and held == sorted(held, reverse=True)
     assert abs(goals[0].v_world[2]) < 1e-9
     assert not goals[-1].held and goals[-1].v_world[2] == pytest.approx(-1.0)
+
+
+def test_a_light_block_slides_under_a_sideways_insertion_not_under_one_from_above(block) -> None:
+    """The same goals: lying, B goes in sideways and the guarded insertion's 20 N drags the block (tens of grams)
+    across the table; stood on end, B's push presses it onto the table. A lighter push (B's seat friction) the
+    lying block resists."""
+    slider = _slider(0.02)
+    task = AssemblyTask(name="slide", part_a=block.spec, part_b=slider.spec, T_A_B=_at(0.01), v_a=[0, 0, -1])
+    goals = ranked_assembly_goals(
+        block, slider, task, compute_placements(block), xy=(0.4, 0.0), yaw=0.0, table_height=0.0, retract=0.05
+    )
+    lying, standing = goals[0].a_load, goals[-1].a_load
+    assert lying is not None and standing is not None
+    assert lying.force_n == pytest.approx(20.0) and lying.slides
+    assert standing.holds and not standing.slides
+    assert 0.0 < lying.resists_n < 20.0
+    assert a_under_insertion(block, slider, goals[0], force_n=0.5 * lying.resists_n).holds
