@@ -116,6 +116,12 @@ class ExecutionSettings(StrictModel):
         "down 0.1 mm off as a rule); below this, aiming at what is seen adds more error than it removes",
     )
     reaim_deg: float = Field(1.0, ge=0.0, description="the same, for the rotation of B's assembled pose, degrees")
+    fixture: Literal["auto", "never", "always"] = Field(
+        "auto",
+        description="a jig holds A while B goes in (asmteach.core.arm.fixture): 'auto' when the plan says A at its "
+        "goal would slide or tip under the insertion's force limit, 'always', or 'never'; a run that uses one says "
+        "'A held by a jig' in its report",
+    )
 
     @field_validator("look_again", mode="before")
     @classmethod

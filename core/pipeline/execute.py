@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from asmteach.core.arm.fixture import clamp_part, jig_decision
 from asmteach.core.arm.insertion import guarded_insert
 from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import Robot
@@ -37,8 +38,11 @@ def execute_stage(run: Run, robot: Robot, plan: Plan, stage: str = "execute") ->
         parts = plan_parts(plan) + ([task.part_a.name, task.part_b.name] if task is not None else [])
         trace = ExecutionTrace(robot, list(dict.fromkeys(parts)), run.report.robot_seconds.get("total", 0.0))
         d["trace"] = trace.events
+        jig = _jig(run, plan, d)
         for seg in plan.segments:
             if seg.trajectory is not None:
+                if jig is not None and seg.kind == "insertion":  # A is at its goal now: clamp it where it stands
+                    d["jig_clamped"] = clamp_part(robot, jig)
                 trace.before_path()
                 seconds = _insert(robot, seg, trace, run.report) if seg.kind == "insertion" else None
                 if seconds is None:
@@ -65,6 +69,19 @@ def execute_stage(run: Run, robot: Robot, plan: Plan, stage: str = "execute") ->
         d["frames_recorded"] = len(frames)
         d["max_tracking_error_rad"] = trace.max_tracking_error
     return frames
+
+
+def _jig(run: Run, plan: Plan, d: dict) -> str | None:
+    """The part a jig holds during this plan's insertions (:mod:`asmteach.core.arm.fixture`), or None; the
+    decision's note goes in the stage's details and the report's metrics say whether A was held."""
+    task = run.report.task
+    if task is None or not any(seg.kind == "insertion" for seg in plan.segments):
+        return None
+    decision = jig_decision(run.execution.fixture, task.part_a.name, plan.stats.get("a_under_insertion"))
+    if decision.note:
+        d["jig"] = decision.note
+    run.report.metrics["a_held_by_jig"] = float(decision.hold)
+    return task.part_a.name if decision.hold else None
 
 
 def _insert(robot: Robot, seg: Any, trace: ExecutionTrace, report: RunReport) -> float | None:

@@ -118,6 +118,10 @@ def _header(report: RunReport) -> str:
             f'<p class="reason"><b>Cause:</b> <code>{_e(cause)}</code> · '
             f"<b>Reason:</b> {_e(report.reason or 'not recorded')}</p>"
         )
+    # a plan that relies on a jig says so where the user looks first (asmteach.core.arm.fixture)
+    reason += "".join(
+        f'<p class="reason"><b>Jig:</b> {_e(s.details["jig"])}</p>' for s in report.stages if s.details.get("jig")
+    )
     total = sum(s.seconds for s in report.stages)
     meta = f"seed {report.seed} · {len(report.stages)} stages · computer {total:.2f} s"
     robot = robot_clock(report)
