@@ -9,6 +9,7 @@ every pose are in the world frame, metres.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -17,8 +18,9 @@ from asmteach.core import geometry
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import Corrector, Detector, PartModel
 from asmteach.core.models import Detection, TablePlane
+from asmteach.core.perception.second_view import DepthView, SecondViewSettings, judge_rivals
 
-__all__ = ["SEGMENT_RADIUS", "detect_and_correct", "part_segment", "provisional_detection"]
+__all__ = ["SEGMENT_RADIUS", "detect_and_correct", "part_segment", "provisional_detection", "resolve_by_views"]
 
 SEGMENT_RADIUS = 0.01
 """Metres: cloud points this close to the part's surface at the rough pose are its observed segment."""
@@ -61,6 +63,49 @@ def provisional_detection(det: Detection) -> Detection:
     )
 
 
+def resolve_by_views(
+    det: Detection,
+    part: PartModel,
+    views: Sequence[DepthView],
+    table: TablePlane | None = None,
+    symmetries: Sequence[np.ndarray] | None = None,
+    settings: SecondViewSettings | None = None,
+) -> Detection:
+    """``det`` settled by every depth view of the scene when it is ambiguous (rivals in ``details["ambiguous"]``).
+
+    ``views`` are all the views, the one ``det`` was detected in first. The rivals and their turns are judged
+    on every view (:func:`~asmteach.core.perception.second_view.judge_rivals`; ``symmetries`` are the part's,
+    part frame, computed when ``None``): the pose they clearly prefer is reported found (``rough``), with
+    ``details["resolved_by_view"]`` giving the costs, gaps and the winner; otherwise the detection stays not
+    found, its reason starting "still ambiguous after N views" and the judgement in ``details["second_view"]``.
+    Anything else (found, not ambiguous, a single view) is returned as it is.
+    """
+    rivals = det.details.get("ambiguous") or []
+    if det.found or len(rivals) < 2 or len(views) < 2:
+        return det
+    t0 = time.perf_counter()
+    poses = [np.asarray(r["T_world_part"], dtype=float) for r in rivals]
+    verdict = judge_rivals(part.mesh, poses, list(views), table or _table_of(det), symmetries, settings=settings)
+    ms = round(1000.0 * (time.perf_counter() - t0), 2)
+    timing = {**det.timing_ms, "second_view": ms, "total": round(det.timing_ms.get("total", 0.0) + ms, 2)}
+    summary = {**verdict.as_details(), "kind": det.details.get("ambiguous_kind"), "views": len(views)}
+    if verdict.winner is None or verdict.pose is None:
+        reason = f"still ambiguous after {len(views)} views: {verdict.why}; first view: {det.reason}"
+        details = {**det.details, "second_view": summary}
+        return det.model_copy(update={"reason": reason, "timing_ms": timing, "details": details})
+    fitness = rivals[verdict.winner].get("fitness", det.fitness) if verdict.winner >= 0 else det.fitness
+    return det.model_copy(
+        update={
+            "found": True,
+            "reason": None,
+            "rough": verdict.pose,
+            "fitness": fitness,
+            "timing_ms": timing,
+            "details": {**det.details, "resolved_by_view": summary, "first_view_reason": det.reason},
+        }
+    )
+
+
 def _table_of(det: Detection) -> TablePlane:
     """The table the detector found (or assumed), else the default one."""
     raw = det.details.get("table")
@@ -76,6 +121,7 @@ def detect_and_correct(
     *,
     viewpoint: np.ndarray | None = None,
     provisional: bool = False,
+    views: Sequence[DepthView] = (),
 ) -> Detection:
     """Detect ``part`` in ``cloud`` ``(n, 3)``, then correct the rough pose when a corrector is given.
 
@@ -85,6 +131,10 @@ def detect_and_correct(
     first of the poses it lists (the best-scoring one) as found, marked ``details["provisional"] = True``
     and still listing them all in ``details["ambiguous"]``. The detector itself never reports such a
     guess as found (:func:`provisional_detection`).
+
+    ``views``: other depth views of the same scene (other cameras, world frame). A detection the first
+    view leaves ambiguous is judged against them first (:func:`resolve_by_views`); only what they leave
+    ambiguous may go on provisionally.
 
     ``viewpoint`` ((3,), world frame, metres) is the camera centre, or ``None`` for
     the detector's own setting; the corrector gets the viewpoint the detector used
@@ -96,6 +146,10 @@ def detect_and_correct(
     ``total`` both, ``cpu_correct`` the correction's process time.
     """
     det = detector.detect(cloud, part, table, viewpoint=viewpoint)
+    if views and not det.found:
+        eye = det.details.get("viewpoint", viewpoint)
+        first = DepthView(np.asarray(cloud, dtype=float), None if eye is None else np.asarray(eye, dtype=float))
+        det = resolve_by_views(det, part, [first, *views], table)
     if provisional and not det.found:
         det = provisional_detection(det)
     if not det.found or corrector is None or det.rough is None:

@@ -1,0 +1,369 @@
+"""A second depth view settles what one view cannot: which of a detection's rival poses the other camera sees.
+
+One view of a D peg turned about its axis with the flat out of sight, or of a near-square block, is explained
+equally well by two poses (the detector lists them, ``details["ambiguous"]``). Another camera looking from
+elsewhere sees the faces that tell them apart. :func:`judge_rivals` predicts, for each rival pose, the range
+every ray of the other view should meet (the part at that pose, else the table plane) and compares it with the
+range the camera measured, in units of the sensor's noise (:class:`KinectSettings`: axial noise at that range,
+the disparity quantisation step, plus a pose allowance). Each ray costs ``min(r^2, c^2)`` (truncated so an edge
+pixel or another object cannot outvote the rest; such rays cost the same under every pose and cancel). The best
+pose wins only when every other rival costs more by a margin that is not noise: the per-ray cost differences
+``d`` must sum to at least ``min_gain`` and to ``z_min`` times ``sqrt(sum d^2)`` (a paired test whose spread is
+measured on the rays themselves), and the winner must explain the rays it predicts on the part
+(``min_explained``). Otherwise the views stay ambiguous.
+
+Frames: every cloud, viewpoint and pose in the world frame, metres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+from pydantic import Field
+from scipy.spatial.transform import Rotation
+
+import asmteach.core  # noqa: F401  (loads libusb before open3d)
+from asmteach.core import geometry
+from asmteach.core.models import StrictModel, TablePlane
+from asmteach.core.perception.depth_camera import KinectSettings
+from asmteach.core.perception.registration import ModelCloud, RefineSettings, icp_refine, model_cloud
+from asmteach.core.pose_error import pose_error
+
+import open3d as o3d  # isort: skip  (after asmteach.core)
+
+__all__ = ["DepthView", "SecondViewSettings", "ViewJudgement", "axis_turns", "judge_rivals", "ray_costs", "screw_turns"]
+
+
+@dataclass(frozen=True)
+class DepthView:
+    """One depth view: its cloud ``(n, 3)`` and the camera centre ``(3,)`` (world frame, metres)."""
+
+    cloud: np.ndarray
+    viewpoint: np.ndarray | None
+
+
+class SecondViewSettings(StrictModel):
+    """How another view judges rival poses (noise units are the sensor's sigma at each ray's range)."""
+
+    clip_sigmas: float = Field(3.0, gt=0.0, description="a ray's residual costs at most this many sigmas, squared")
+    pose_sigma: float = Field(
+        0.001, ge=0.0, description="metres added (in quadrature) to the sensor noise: the rivals were fit to one view"
+    )
+    z_min: float = Field(
+        5.0, gt=0.0, description="the cost gap must be this many times its own spread over the rays (paired test)"
+    )
+    min_gain: float = Field(50.0, gt=0.0, description="least cost gap (sum of squared sigmas) a winner needs")
+    min_explained: float = Field(
+        0.6, ge=0.0, le=1.0, description="least share of the rays a winner puts on the part that it explains"
+    )
+    margin: float = Field(0.01, ge=0.0, description="rays passing this far (metres) around the part are judged")
+    step_deg: float = Field(10.0, gt=0.0, le=90.0, description="turns about the rivals' screw axis tried, degrees")
+    refine_top: int = Field(8, ge=1, description="cheapest grid candidates refined and compared with the rivals")
+    distinct_mm: float = Field(5.0, gt=0.0, description="a candidate this far from the winner must lose, mm")
+    distinct_deg: float = Field(5.0, gt=0.0, description="... or turned this far from it, degrees")
+
+
+@dataclass
+class ViewJudgement:
+    """What the views say about rival poses: ``winner`` (index into the rivals, -1 for another pose) or ``None``."""
+
+    winner: int | None
+    costs: list[float]
+    """Total cost of each rival, then of the winner, over every judged ray of every view (squared sigmas)."""
+    gains: list[float]
+    """Cost gap of each rival over the best one (0 for the best)."""
+    z: list[float]
+    """Gap over its spread, per rival (inf for the best)."""
+    explained: float
+    """Share of the rays the best pose puts on the part that it explains (within ``clip_sigmas``)."""
+    rays: int
+    why: str | None = None
+    pose: np.ndarray | None = None
+    """The cheapest candidate (``T_world_part``), refined on every view: the pose reported when it wins."""
+    candidates: int = 0
+    weakest_gain: float | None = None
+    """Cost gap of the cheapest candidate distinct from the winner (squared sigmas)."""
+    weakest_z: float | None = None
+
+    def as_details(self) -> dict:
+        """JSON-ready summary for ``Detection.details``."""
+        return {
+            "winner": self.winner,
+            "costs": [round(c, 1) for c in self.costs],
+            "gains": [round(g, 1) for g in self.gains],
+            "z": [round(z, 2) if np.isfinite(z) else None for z in self.z],
+            "explained": round(self.explained, 3),
+            "rays": self.rays,
+            "candidates": self.candidates,
+            "closest_rival_gain": None if self.weakest_gain is None else round(self.weakest_gain, 1),
+            "closest_rival_z": None if self.weakest_z is None else round(self.weakest_z, 2),
+            "best_T_world_part": None if self.pose is None else np.asarray(self.pose).tolist(),
+        }
+
+
+def _sigma(rng: np.ndarray, sensor: KinectSettings, pose_sigma: float) -> np.ndarray:
+    """Per-ray std (metres) of the measured range ``rng``: axial noise, quantisation step / sqrt(12), pose."""
+    var = np.full(rng.shape, pose_sigma**2)
+    if sensor.axial_noise:
+        var += sensor.axial_sigma(rng) ** 2
+    if sensor.quantize:
+        step = rng**2 / (sensor.baseline * sensor.fx * sensor.disparity_subpixel)
+        var += step**2 / 12.0
+    return np.sqrt(var)
+
+
+def _in_cone(view: DepthView, centers: np.ndarray, radius: float) -> np.ndarray:
+    """Mask of the view's points whose rays pass within the sphere that holds every sphere of ``radius``
+    about ``centers`` (the candidates turn about the part's centre: one sphere does), and that do not lie in
+    front of it (an occluder there is no evidence either way)."""
+    eye = np.asarray(view.viewpoint, float)
+    c = np.asarray(centers, float).mean(axis=0)
+    radius = radius + float(np.max(np.linalg.norm(np.asarray(centers, float) - c, axis=1)))
+    d = np.asarray(view.cloud, float) - eye
+    rng = np.linalg.norm(d, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        along = (d @ (c - eye)) / rng
+    off2 = float((c - eye) @ (c - eye)) - along**2
+    return np.isfinite(along) & (rng > 1e-6) & (off2 <= radius**2) & (rng >= along - radius)
+
+
+def _near_rays(view: DepthView, centers: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(unit directions, measured ranges)`` of the view's rays in :func:`_in_cone`."""
+    d = np.asarray(view.cloud, float)[_in_cone(view, centers, radius)] - np.asarray(view.viewpoint, float)
+    rng = np.linalg.norm(d, axis=1)
+    return d / rng[:, None], rng
+
+
+def _part_scene(mesh: trimesh.Trimesh) -> o3d.t.geometry.RaycastingScene:
+    """Ray-casting scene of ``mesh`` in the part frame: each pose moves the rays, not the mesh."""
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(np.asarray(mesh.vertices, dtype=np.float32)),
+        o3d.core.Tensor(np.asarray(mesh.faces, dtype=np.uint32)),
+    )
+    return scene
+
+
+def _predicted_ranges(
+    scene: o3d.t.geometry.RaycastingScene, T_world_part: np.ndarray, eye: np.ndarray, u: np.ndarray, table: TablePlane
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(range, on_part)``: where each ray from ``eye`` along ``u`` first meets the part or the table plane."""
+    T_pw = geometry.invert(T_world_part)
+    eye_p = T_pw[:3, :3] @ eye + T_pw[:3, 3]
+    rays = np.hstack([np.broadcast_to(eye_p, u.shape), u @ T_pw[:3, :3].T]).astype(np.float32)
+    t_part = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy().astype(float)
+    n = np.asarray(table.normal, float)
+    denom = u @ n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_table = (table.height - float(n @ eye)) / denom
+    t_table = np.where((denom < -1e-9) & (t_table > 0), t_table, np.inf)
+    return np.minimum(t_part, t_table), t_part < t_table
+
+
+def ray_costs(
+    mesh: trimesh.Trimesh,
+    poses: list[np.ndarray],
+    view: DepthView,
+    table: TablePlane,
+    sensor: KinectSettings | None = None,
+    settings: SecondViewSettings | None = None,
+    around: list[np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(costs (k, m), on_part (k, m))`` of the ``k`` poses on the ``m`` rays of ``view`` near any of them
+    (or near any pose of ``around``, so that poses scored in several calls share the rays).
+
+    A ray's cost is its squared residual (measured minus predicted range) in sigmas, clipped at
+    ``clip_sigmas``; ``on_part`` says the pose puts the part (not the table) first on that ray.
+    """
+    s = settings or SecondViewSettings()
+    sensor = sensor or KinectSettings()
+    center = np.asarray(mesh.bounds, float).mean(axis=0)
+    radius = float(np.max(np.linalg.norm(np.asarray(mesh.vertices, float) - center, axis=1))) + s.margin
+    centers = np.array([geometry.transform_points(T, center[None])[0] for T in (around or poses)])
+    u, measured = _near_rays(view, centers, radius)
+    eye = np.asarray(view.viewpoint, float)
+    sigma = _sigma(measured, sensor, s.pose_sigma)
+    costs = np.empty((len(poses), len(u)))
+    on_part = np.empty((len(poses), len(u)), dtype=bool)
+    scene = _part_scene(mesh)
+    for i, T in enumerate(poses):
+        pred, on_part[i] = _predicted_ranges(scene, np.asarray(T, float), eye, u, table)
+        r = np.where(np.isfinite(pred), (measured - pred) / sigma, np.inf)
+        costs[i] = np.minimum(r * r, s.clip_sigmas**2)
+    return costs, on_part
+
+
+def screw_turns(T_a: np.ndarray, T_b: np.ndarray, step_deg: float) -> list[np.ndarray]:
+    """``T_a`` turned about the screw axis that takes it to ``T_b`` (world frame), every ``step_deg`` all round.
+
+    Two poses one view cannot tell apart are usually the part turned about one of its near-symmetry axes (a D
+    peg about its own): the truth may lie anywhere on that turn, not only at the two poses listed.
+    """
+    T_rel = np.asarray(T_b, float) @ geometry.invert(T_a)
+    rotvec = Rotation.from_matrix(T_rel[:3, :3]).as_rotvec()
+    angle = float(np.linalg.norm(rotvec))
+    if angle < np.radians(step_deg) / 2:
+        return []
+    axis = rotvec / angle
+    t = T_rel[:3, 3]
+    # a point on the axis: (I - R) p = t less its slide along the axis (least squares: I - R is singular along it)
+    p = np.linalg.lstsq(np.eye(3) - T_rel[:3, :3], t - (t @ axis) * axis, rcond=None)[0]
+    out = []
+    for phi in np.radians(np.arange(step_deg, 360.0 - step_deg / 2, step_deg)):
+        R = Rotation.from_rotvec(axis * phi).as_matrix()
+        out.append(geometry.from_rotation(R, p - R @ p) @ T_a)
+    return out
+
+
+def axis_turns(mesh: trimesh.Trimesh, T: np.ndarray, step_deg: float) -> list[np.ndarray]:
+    """``T`` turned about each principal axis of ``mesh`` through its centre of mass (part frame), every
+    ``step_deg`` all round: the turns that keep a nearly symmetric part nearly in place (a keyed peg about its
+    axis, a near-square block about its normal) are among them."""
+    from asmteach.core.symmetry import principal_frame
+
+    com = np.asarray(mesh.center_mass, float)
+    out = []
+    for axis in principal_frame(mesh).T:
+        for phi in np.radians(np.arange(step_deg, 360.0 - step_deg / 2, step_deg)):
+            R = Rotation.from_rotvec(axis * phi).as_matrix()
+            out.append(np.asarray(T, float) @ geometry.from_rotation(R, com - R @ com))
+    return out
+
+
+_SYMMETRIES: dict[int, tuple[trimesh.Trimesh, np.ndarray]] = {}
+
+
+def _symmetries_of(mesh: trimesh.Trimesh) -> np.ndarray:
+    """The part's own symmetries (part frame, about its centre of mass), computed once per mesh."""
+    from asmteach.core.symmetry import part_symmetries
+
+    hit = _SYMMETRIES.get(id(mesh))
+    if hit is None or hit[0] is not mesh:
+        hit = (mesh, np.asarray(part_symmetries(mesh, np.asarray(mesh.center_mass, float))))
+        _SYMMETRIES[id(mesh)] = hit
+    return hit[1]
+
+
+def _fused_refine(model: ModelCloud, T: np.ndarray, views: list[DepthView], table: TablePlane) -> np.ndarray:
+    """``T`` refined by point-to-plane ICP on the points every view saw near the part's surface above the table."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(geometry.transform_points(T, model.points))
+    n = np.asarray(table.normal, float)
+    segs = []
+    for v in views:
+        pts = np.asarray(v.cloud, float)
+        pts = pts[np.all(np.isfinite(pts), axis=1)]
+        d, _ = tree.query(pts, distance_upper_bound=0.01)
+        segs.append(pts[np.isfinite(d) & (pts @ n > table.height + 0.002)])
+    seg = np.vstack(segs)
+    if len(seg) < 30:
+        return T
+    return icp_refine(seg, model, T, RefineSettings())
+
+
+def judge_rivals(
+    mesh: trimesh.Trimesh,
+    poses: list[np.ndarray],
+    views: list[DepthView],
+    table: TablePlane,
+    symmetries: np.ndarray | list[np.ndarray] | None = None,
+    sensor: KinectSettings | None = None,
+    settings: SecondViewSettings | None = None,
+) -> ViewJudgement:
+    """Which pose every view (the first one included) clearly prefers among ``poses`` and their turns, if any.
+
+    ``poses`` (``T_world_part``) are the rivals one view could not tell apart (best first). The candidates
+    are they, the first turned all round about the screw axis to each other one (:func:`screw_turns`) and
+    each turned all round about the part's principal axes (:func:`axis_turns`), every ``step_deg``: the truth
+    need not be one of the poses listed. Each is scored on the rays of every view. The cheapest, refined by
+    ICP on the points every view saw of it (kept when cheaper still), wins when every candidate distinct from it (beyond
+    ``distinct_mm`` / ``distinct_deg``, up to the part's ``symmetries``, part frame; computed when ``None``)
+    costs more by the margin. ``winner`` indexes ``poses`` when the winner is within the tolerance of one of
+    them, else it is ``-1`` and ``pose`` holds it.
+    """
+    s = settings or SecondViewSettings()
+    usable = [v for v in views if v.viewpoint is not None and len(v.cloud)]
+    if len(poses) < 2 or len(usable) < 2:
+        return ViewJudgement(None, [], [], [], 0.0, 0, "fewer than two views with a camera centre")
+    syms = _symmetries_of(mesh) if symmetries is None else np.asarray(symmetries, float).reshape(-1, 4, 4)
+    cands = [np.asarray(T, float) for T in poses]
+    for T in poses[1:]:
+        cands += screw_turns(cands[0], np.asarray(T, float), s.step_deg)
+    for T in poses:
+        cands += axis_turns(mesh, np.asarray(T, float), s.step_deg)
+    center = np.asarray(mesh.bounds, float).mean(axis=0)
+    radius = float(np.max(np.linalg.norm(np.asarray(mesh.vertices, float) - center, axis=1))) + s.margin
+    centers = np.array([geometry.transform_points(T, center[None])[0] for T in cands])
+    # every step below needs only the points around the part: crop each view once (a frame holds 300 000)
+    usable = [DepthView(np.asarray(v.cloud, float)[_in_cone(v, centers, radius)], v.viewpoint) for v in usable]
+    raw, _ = _all_costs(mesh, cands, usable, table, sensor, s, cands)
+    raw_total = raw.sum(axis=1)
+    # The grid only finds the basins: the poses compared are the rivals and the cheapest candidates, each
+    # refined on every view, so that a neighbour a grid step away is not taken for a rival.
+    seeds = list(range(len(poses))) + [int(i) for i in np.argsort(raw_total)[: s.refine_top] if i >= len(poses)]
+    model = model_cloud(mesh, 4000)
+    pool = [_fused_refine(model, cands[i], usable, table) for i in seeds]
+    costs, on_part = _all_costs(mesh, pool, usable, table, sensor, s, cands)
+    best = int(np.argmin(costs.sum(axis=1)))
+    cands = pool
+    total = costs.sum(axis=1)
+    gains, zs = [], []
+    weakest = None
+    for i, T in enumerate(cands):
+        d = costs[i] - costs[best]
+        spread = float(np.sqrt(np.sum(d * d)))
+        gains.append(float(d.sum()))
+        zs.append(gains[-1] / spread if spread > 0 else 0.0)
+        if i != best and not pose_error(T, cands[best], right=syms).within(s.distinct_mm, s.distinct_deg):
+            if weakest is None or (gains[i], zs[i]) < (gains[weakest], zs[weakest]):
+                weakest = i
+    mine = on_part[best]
+    explained = float(np.mean(costs[best][mine] < s.clip_sigmas**2)) if mine.any() else 0.0
+    why = None
+    if weakest is not None and (gains[weakest] < s.min_gain or zs[weakest] < s.z_min):
+        mm, deg = _apart(cands[weakest], cands[best], syms)
+        why = (
+            f"no pose is clearly preferred: one {mm:.0f} mm and {deg:.0f} deg away costs {gains[weakest]:.0f} "
+            f"sigma^2 more, {zs[weakest]:.1f} times its spread (needs {s.min_gain:.0f} and {s.z_min:.0f})"
+        )
+    elif explained < s.min_explained:
+        need = 100 * s.min_explained
+        why = f"the best pose explains {100 * explained:.0f} % of the rays on it (needs {need:.0f} %)"
+    near = [
+        i for i, T in enumerate(poses) if pose_error(T, cands[best], right=syms).within(s.distinct_mm, s.distinct_deg)
+    ]
+    return ViewJudgement(
+        winner=None if why else (near[0] if near else -1),
+        costs=[float(raw_total[i]) for i in range(len(poses))] + [float(total[best])],
+        gains=[float(raw_total[i] - total[best]) for i in range(len(poses))],
+        z=[zs[i] if i != best else float("inf") for i in range(len(poses))],  # the rivals refined
+        explained=explained,
+        rays=int(costs.shape[1]),
+        why=why,
+        pose=cands[best],
+        candidates=len(raw_total),
+        weakest_gain=None if weakest is None else gains[weakest],
+        weakest_z=None if weakest is None else zs[weakest],
+    )
+
+
+def _apart(A: np.ndarray, B: np.ndarray, syms: np.ndarray) -> tuple[float, float]:
+    err = pose_error(A, B, right=syms)
+    return err.position_mm, err.angle_deg
+
+
+def _all_costs(
+    mesh: trimesh.Trimesh,
+    poses: list[np.ndarray],
+    views: list[DepthView],
+    table: TablePlane,
+    sensor: KinectSettings | None,
+    s: SecondViewSettings,
+    around: list[np.ndarray],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Ray costs and on-part flags of ``poses`` over every view's rays near the ``around`` poses, side by side."""
+    parts = [ray_costs(mesh, poses, v, table, sensor, s, around) for v in views]
+    return np.hstack([c for c, _ in parts]), np.hstack([o for _, o in parts])
