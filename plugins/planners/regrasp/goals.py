@@ -56,6 +56,7 @@ __all__ = [
     "free_travel",
     "ranked_assembly_goals",
     "slides_out",
+    "snap_to_faces",
 ]
 
 VERTICAL_SNAP = float(np.radians(2.0))
@@ -163,12 +164,13 @@ def assembly_goal_at(
 ) -> AssemblyGoal:
     """The goal with A at ``T_world_a`` (metres): B at ``T_world_a @ T_A_B``, its pre-assembly pose behind it.
 
-    The insertion direction is snapped to straight down as :func:`ranked_assembly_goals` does;
-    also used for an A already standing somewhere (seen at its goal), to aim B at it.
+    The insertion direction is snapped to the nearest of A's plane faces' normals (:func:`snap_to_faces`), then
+    to straight down, both within ``vertical_snap`` radians, as :func:`ranked_assembly_goals` does; also used for
+    an A already standing somewhere (seen at its goal), to aim B at it.
     """
-    v_a = np.asarray(task.v_a, float)
+    v_a = snap_to_faces(np.asarray(task.v_a, float), part_a, vertical_snap)
     T_a = np.asarray(T_world_a, float)
-    v_w = T_a[:3, :3] @ (v_a / np.linalg.norm(v_a))
+    v_w = T_a[:3, :3] @ v_a
     if float(np.arccos(np.clip(-v_w[2], -1.0, 1.0))) <= vertical_snap:
         v_w = np.array([0.0, 0.0, -1.0])  # teaching noise, not a slanted insertion (module docstring)
     T_b = T_a @ task.T_A_B
@@ -186,6 +188,38 @@ def a_under_insertion(
     force = InsertionSettings().force_limit_n if force_n is None else float(force_n)
     com_b = transform_points(goal.T_world_b, np.asarray(part_b.center_of_mass, float)[None])[0]
     return insertion_stability(part_a, goal.T_world_a, goal.v_world, force, com_b)
+
+
+FACE_SHARE = 0.02
+"""A plane face (coplanar triangles) of at least this share of A's surface area is a design direction a taught
+``v_a`` snaps to (a tessellated curve's small triangles are not)."""
+
+
+def snap_to_faces(v_a: np.ndarray, part_a: PartModel, max_angle: float) -> np.ndarray:
+    """Unit ``v_a`` (A's frame), or the normal of one of A's plane faces (:data:`FACE_SHARE`) within ``max_angle``
+    radians of its line (either sense; the sense of ``v_a`` kept), the nearest.
+
+    A sideways insertion is taught to about a degree too (T-slider: 0.9 deg), and over a 50 mm slide that puts B
+    0.8 mm across a 0.65 mm clearance; a slot, a hole or a groove runs along the normal of A's faces (the end
+    faces it opens in), so a taught direction that close to one is taken as it, as straight down is at the goal.
+    """
+    v = np.asarray(v_a, float) / np.linalg.norm(v_a)
+    if max_angle <= 0.0:
+        return v
+    mesh = part_a.mesh
+    area = np.asarray(mesh.area_faces, float)
+    normals = [np.asarray(mesh.face_normals, float)[area >= FACE_SHARE * mesh.area]]
+    if len(mesh.facets):
+        big = np.asarray(mesh.facets_area, float) >= FACE_SHARE * mesh.area
+        normals.append(np.asarray(mesh.facets_normal, float)[big])
+    n = np.concatenate(normals)
+    if not len(n):
+        return v
+    cos = n @ v
+    k = int(np.argmax(np.abs(cos)))
+    if abs(cos[k]) < np.cos(max_angle):
+        return v
+    return np.sign(cos[k]) * n[k] / np.linalg.norm(n[k])
 
 
 CLEAR_MARGIN = 0.005

@@ -21,7 +21,8 @@ class AssemblySettings(StrictModel):
         2.0,
         ge=0.0,
         le=10.0,
-        description="a taught v_a this close to straight down at A's goal is made straight down, degrees (0: off)",
+        description="a taught v_a this close to the normal of one of A's plane faces is made that normal, and one this "
+        "close to straight down at A's goal is made straight down, degrees (0: off)",
     )
     goal_xy: tuple[float, float] = Field((0.40, 0.0), description="where A is assembled on the table (world x, y)")
     goal_yaw: float = Field(0.0, description="yaw of A's goal placement about the table normal")

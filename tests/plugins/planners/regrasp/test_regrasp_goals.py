@@ -12,7 +12,12 @@ from asmteach.core import geometry
 from asmteach.core.models import AssemblyTask, PartSpec, Primitive, SolidSpec
 from asmteach.core.parts import build_part
 from asmteach.core.rests.placements import compute_placements
-from asmteach.plugins.planners.regrasp.goals import a_under_insertion, ranked_assembly_goals, slides_out
+from asmteach.plugins.planners.regrasp.goals import (
+    a_under_insertion,
+    ranked_assembly_goals,
+    slides_out,
+    snap_to_faces,
+)
 
 DOWN = np.array([0.0, 0.0, -1.0])
 
@@ -80,3 +85,13 @@ def test_a_light_block_slides_under_a_sideways_insertion_not_under_one_from_abov
     assert standing.holds and not standing.slides
     assert 0.0 < lying.resists_n < 20.0
     assert a_under_insertion(block, slider, goals[0], force_n=0.5 * lying.resists_n).holds
+
+
+def test_a_taught_direction_a_degree_off_a_face_normal_is_snapped_to_it(block) -> None:
+    """The hole runs along the block's z: a v_a taught 1 deg off it is made exactly -z, one 5 deg off is kept."""
+    snap = float(np.radians(2.0))
+    one = geometry.from_rpy(np.radians(1.0), 0.0, 0.0)[:3, :3] @ DOWN
+    assert snap_to_faces(one, block, snap) == pytest.approx(DOWN)
+    five = geometry.from_rpy(np.radians(5.0), 0.0, 0.0)[:3, :3] @ DOWN
+    assert snap_to_faces(five, block, snap) == pytest.approx(five)
+    assert snap_to_faces(one, block, 0.0) == pytest.approx(one)  # snapping off
