@@ -122,6 +122,7 @@ def detect_and_correct(
     viewpoint: np.ndarray | None = None,
     provisional: bool = False,
     views: Sequence[DepthView] = (),
+    symmetries: Sequence[np.ndarray] | None = None,
 ) -> Detection:
     """Detect ``part`` in ``cloud`` ``(n, 3)``, then correct the rough pose when a corrector is given.
 
@@ -134,7 +135,8 @@ def detect_and_correct(
 
     ``views``: other depth views of the same scene (other cameras, world frame). A detection the first
     view leaves ambiguous is judged against them first (:func:`resolve_by_views`); only what they leave
-    ambiguous may go on provisionally.
+    ambiguous may go on provisionally. ``symmetries``: the part's (part frame; computed when needed and
+    ``None``), so that a pose the views cannot tell from the winner by a symmetry is no rival.
 
     ``viewpoint`` ((3,), world frame, metres) is the camera centre, or ``None`` for
     the detector's own setting; the corrector gets the viewpoint the detector used
@@ -149,7 +151,7 @@ def detect_and_correct(
     if views and not det.found:
         eye = det.details.get("viewpoint", viewpoint)
         first = DepthView(np.asarray(cloud, dtype=float), None if eye is None else np.asarray(eye, dtype=float))
-        det = resolve_by_views(det, part, [first, *views], table)
+        det = resolve_by_views(det, part, [first, *views], table, symmetries)
     if provisional and not det.found:
         det = provisional_detection(det)
     if not det.found or corrector is None or det.rough is None:

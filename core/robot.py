@@ -272,6 +272,11 @@ class World(abc.ABC):
         """
         raise NotImplementedError(f"{type(self).__name__} does not know its camera pose")
 
+    def depth_views(self) -> int:
+        """How many depth cameras the world has; a world with more takes ``view=i`` in :meth:`sense_depth`
+        and :meth:`camera_pose` (0 is the one above). Optional: one unless a world says otherwise."""
+        return 1
+
     def sense_rgb(self) -> np.ndarray:
         """An RGB image ``(h, w, 3) uint8`` of the cell (the run's animation is made of them).
 

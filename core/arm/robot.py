@@ -65,7 +65,7 @@ class ArmRobot(Robot, World):
         self._sim: PyBulletWorld | None = None
         self._table = TablePlane(height=self.settings.table_height)
         self._world_q: dict[str, np.ndarray] = {}  # arm -> joints in the world (radians)
-        self._depth_cam: Any = None  # the virtual Kinect, made on the first sense_depth (open3d loads then)
+        self._depth_cams: list[Any] = []  # the virtual Kinects, made on the first sense_depth (open3d loads then)
 
     def _setup(
         self,
@@ -328,12 +328,23 @@ class ArmRobot(Robot, World):
         where = sum(c[9] * np.asarray(c[5], dtype=float) for c in points) / force
         return PartContact(force, where, com)
 
-    def camera_pose(self) -> np.ndarray:
-        """``T_world_cam`` (OpenCV frame) of the simulated depth and RGB cameras."""
+    def camera_pose(self, view: int = 0) -> np.ndarray:
+        """``T_world_cam`` (OpenCV frame) of depth camera ``view`` (0: the one the RGB camera shares)."""
         from asmteach.core.perception.depth_camera import look_at
 
-        c, h = self.settings.camera, self._table.height
+        c, h = self._mount(view), self._table.height
         return look_at([c.eye[0], c.eye[1], h + c.eye[2]], [c.target[0], c.target[1], h + c.target[2]])
+
+    def depth_views(self) -> int:
+        """How many depth cameras the cell has (``settings.camera``, and ``settings.second_camera`` if set)."""
+        return 1 if self.settings.second_camera is None else 2
+
+    def _mount(self, view: int) -> Any:
+        if view == 0:
+            return self.settings.camera
+        if view == 1 and self.settings.second_camera is not None:
+            return self.settings.second_camera
+        raise UserError(f"depth camera {view} is not configured (the robot has {self.depth_views()})")
 
     def _scene_meshes(self) -> list[tuple[trimesh.Trimesh, np.ndarray]]:
         """Table, parts and the robot's collision primitives at their current world poses."""
@@ -362,19 +373,23 @@ class ArmRobot(Robot, World):
             meshes.append((mesh, static[g.joint] @ g.placement @ g.obb))
         return meshes
 
-    def sense_depth(self) -> tuple[np.ndarray, np.ndarray]:
+    def sense_depth(self, view: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Kinect-v1 depth ``(480, 640)`` metres (NaN = no return) and the world-frame cloud ``(n, 3)``
-        of the table and the parts (points on the robot itself are filtered out).
+        of the table and the parts (points on the robot itself are filtered out), from depth camera ``view``.
 
         Uses the project's one depth-camera model
-        (:mod:`asmteach.core.perception.depth_camera`) at :meth:`camera_pose`.
+        (:mod:`asmteach.core.perception.depth_camera`) at :meth:`camera_pose`. Each camera draws its
+        noise from its own generator, so the first camera's frames do not change when a second is added.
         """
         from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
 
-        if self._depth_cam is None:
-            self._depth_cam = DepthCamera(KinectSettings(), seed=self.seed)
+        pose = self.camera_pose(view)
+        while len(self._depth_cams) <= view:
+            # camera 0 keeps the seed it always had: the first view is the same with or without a second
+            k = len(self._depth_cams)
+            self._depth_cams.append(DepthCamera(KinectSettings(), seed=self.seed if k == 0 else 1000 * k + self.seed))
         meshes = self._scene_meshes()
-        frame = self._depth_cam.render(meshes, self.camera_pose())
+        frame = self._depth_cams[view].render(meshes, pose)
         # Robot self-filter (as robot_self_filter does on a real cell): the cloud keeps the table and
         # the parts; the depth image keeps everything the sensor saw.
         n_world = 1 + len(self.sim.parts)

@@ -42,3 +42,8 @@ class ArmRobotSettings(StrictModel):
         description="positionGain of the simulated joint servos; PyBullet's default 0.1 leaves ~1 mrad steady error",
     )
     camera: CameraMount = Field(default_factory=CameraMount, description="where the simulated camera sits")
+    second_camera: CameraMount | None = Field(
+        None,
+        description="a second depth camera (same model, its own noise): a detection the first view leaves "
+        "ambiguous is judged on both views; null: one camera",
+    )

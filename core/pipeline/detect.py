@@ -12,11 +12,12 @@ from asmteach.core.detect_correct import detect_and_correct
 from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import PartModel, Robot
 from asmteach.core.models import Detection, TablePlane
+from asmteach.core.perception.second_view import DepthView
 from asmteach.core.pipeline.stage import Run, StageFailed
 from asmteach.core.pose_error import pose_error
 from asmteach.core.scene import random_start_poses
 
-__all__ = ["detect_stage", "not_found_cause", "sense", "spawn_stage", "symmetric_surface_error"]
+__all__ = ["detect_stage", "not_found_cause", "sense", "sense_views", "spawn_stage", "symmetric_surface_error"]
 
 
 def symmetric_surface_error(part: PartModel, T_est: np.ndarray, T_true: np.ndarray, n: int = 500) -> float:
@@ -58,14 +59,25 @@ def detect_stage(
     with run.stage("detect", total=len(parts)) as d:
         detector = run.plugin("detector")
         corrector = run.plugin("corrector") if run.cfg.corrector is not None else None
-        depth, cloud, viewpoint = sense(robot, run.execution.depth_frames)
+        depth, views = sense_views(robot, run.execution.depth_frames)
+        cloud, viewpoint = views[0].cloud, views[0].viewpoint
         np.save(run.out / "depth.npy", depth.astype(np.float32))
         out: dict[str, Detection] = {}
         for part in parts:
             detector.prepare(part)
             # Only A is looked at again once moved (run.py): only A may go on with one of two hull twins.
             again = run.execution.look_again != "never" and part is parts[0]
-            det = detect_and_correct(detector, corrector, cloud, part, table, viewpoint=viewpoint, provisional=again)
+            det = detect_and_correct(
+                detector,
+                corrector,
+                cloud,
+                part,
+                table,
+                viewpoint=viewpoint,
+                provisional=again,
+                views=views[1:],
+                symmetries=run.symmetries(part) if len(views) > 1 else None,
+            )
             if not det.found or det.rough is None:
                 run.report.detections.append(det)
                 raise StageFailed(f"{part.name} not found: {det.reason}", cause=not_found_cause(det))
@@ -97,17 +109,39 @@ def detect_stage(
 
 
 def sense(robot: Robot, frames: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """``(depth image, cloud (n, 3) world frame, camera centre or None)`` from the robot's depth camera.
+    """``(depth image, cloud (n, 3) world frame, camera centre or None)`` from the robot's first depth camera.
 
     The clouds of ``frames`` depth frames are stacked (the parts stand still;
     the sensor's noise is new in every frame, so the detector's voxel filter
-    and ICP average it out); the depth image is the first frame's.
+    and ICP average it out); the depth image is the first frame's. :func:`sense_views` gives every camera.
     """
-    depth, cloud = robot.sense_depth()
-    if frames > 1:
-        cloud = np.concatenate([cloud] + [robot.sense_depth()[1] for _ in range(frames - 1)])
-    try:
-        viewpoint = robot.camera_pose()[:3, 3]
-    except NotImplementedError:
-        viewpoint = None
-    return depth, cloud, viewpoint
+    depth, views = sense_views(robot, frames, cameras=1)
+    return depth, views[0].cloud, views[0].viewpoint
+
+
+def _shot(robot: Robot, view: int) -> tuple[np.ndarray, np.ndarray]:
+    return robot.sense_depth() if view == 0 else robot.sense_depth(view=view)  # type: ignore[call-arg]
+
+
+def sense_views(robot: Robot, frames: int = 1, cameras: int | None = None) -> tuple[np.ndarray, list[DepthView]]:
+    """``(first camera's depth image, every view)``: one :class:`DepthView` (stacked cloud of ``frames``
+    frames, world frame, and camera centre or ``None``) per depth camera of the robot
+    (:meth:`~asmteach.core.robot.Robot.depth_views`, or the first ``cameras``)."""
+    # asked for one camera, a world need not say how many it has
+    n = 1 if cameras == 1 else min(robot.depth_views(), cameras or robot.depth_views())
+    depth = np.empty((0, 0))
+    views = []
+    for view in range(n):
+        first, cloud = _shot(robot, view)
+        if frames > 1:
+            cloud = np.concatenate([cloud] + [_shot(robot, view)[1] for _ in range(frames - 1)])
+        try:
+            # the first camera is asked as it always was (no view argument): a world with one need not take it
+            eye = robot.camera_pose() if view == 0 else robot.camera_pose(view=view)  # type: ignore[call-arg]
+            viewpoint = np.asarray(eye)[:3, 3]
+        except NotImplementedError:
+            viewpoint = None
+        if view == 0:
+            depth = first
+        views.append(DepthView(cloud, viewpoint))
+    return depth, views
