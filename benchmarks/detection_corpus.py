@@ -11,6 +11,12 @@ geodesic rotation in degrees, of the rough pose (the detector alone, no correcto
 
     .venv/bin/python benchmarks/detection_corpus.py                 # whole corpus, 5 scenes each
     .venv/bin/python benchmarks/detection_corpus.py --parts 10      # every 4th-ish part (evenly spread)
+    .venv/bin/python benchmarks/detection_corpus.py --two-view      # also a second Kinect across the table
+
+``--two-view`` renders every scene a second time from the second camera (``--second-eye``, default
+:data:`~asmteach.plugins.detectors.cvfh.scenes.SECOND_EYE`; the first view is the same frame as without it),
+judges each ambiguous detection against that view (:func:`asmteach.core.detect_correct.resolve_by_views`)
+and reports one-view and two-view outcomes side by side, per family.
 
 Prints one line per scene (found and its error, or the rejection reason) and the totals against the
 targets: success (found within 5 mm / 5 deg) on >= 95 % of scenes, and no pose more than 5 mm / 5 deg
@@ -62,6 +68,29 @@ def describe(row: dict) -> str:
     return f"miss  {row['reason']}"
 
 
+def _two(row: dict) -> dict:
+    """The row as the two-view outcome (its ``two_*`` keys in place of the one-view ones)."""
+    return {**row, **{k[4:]: v for k, v in row.items() if k.startswith("two_")}, "alternatives": 0}
+
+
+def _tally(rows: list[dict]) -> str:
+    ok = sum(r["success"] for r in rows)
+    wrong = sum(r["wrong_found"] for r in rows)
+    amb = sum((not r["found"]) and "ambiguous" in r["reason"] for r in rows)
+    return f"{ok} / {wrong} / {amb} / {len(rows) - ok - wrong - amb}"
+
+
+def family_table(rows: list[dict]) -> str:
+    """Markdown table per family: found ok / wrong / ambiguous / other misses, one view and two views."""
+    lines = ["| family (scenes) | one view: ok / wrong / ambiguous / other | two views: the same |", "|---|---|---|"]
+    families = sorted({r["family"] for r in rows}, key=lambda f: [r["family"] for r in rows].index(f))
+    for fam in [*families, None]:
+        sel = [r for r in rows if fam is None or r["family"] == fam]
+        name = f"**all ({len(sel)})**" if fam is None else f"{fam} ({len(sel)})"
+        lines.append(f"| {name} | {_tally(sel)} | {_tally([_two(r) for r in sel])} |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--parts", type=int, default=0, help="evenly spread subsample of this many parts (0: all)")
@@ -71,6 +100,15 @@ def main() -> None:
     ap.add_argument("--detector", default="cvfh_icp", help="detector plugin")
     ap.add_argument("--out", type=Path, default=OUT, help="CSV of every scene")
     ap.add_argument("--cad", action="store_true", help="load each part from a CAD-style mm STL with open faces")
+    ap.add_argument("--two-view", action="store_true", help="also judge ambiguous detections by a second view")
+    ap.add_argument(
+        "--second-eye",
+        nargs=3,
+        type=float,
+        default=None,
+        metavar=("X", "Y", "Z"),
+        help="second camera centre (world x, y; z above the table; metres), looking at the work centre",
+    )
     args = ap.parse_args()
 
     from asmteach.core.corpus import part_corpus
@@ -80,6 +118,10 @@ def main() -> None:
         corpus = [c for c in corpus if c.name in set(args.only)]
     elif args.parts and args.parts < len(corpus):
         corpus = [corpus[int(i)] for i in np.linspace(0, len(corpus) - 1, args.parts).round()]
+    from asmteach.core.config import TableSettings
+    from asmteach.plugins.detectors.cvfh.scenes import second_camera_pose
+
+    T_cam2 = second_camera_pose(TableSettings(), args.second_eye) if args.two_view else None
     rows: list[dict] = []
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
@@ -87,10 +129,15 @@ def main() -> None:
             part = load_part(cp.name, cp.mesh, Path(tmp), args.seed, args.cad)
             detector = registry.create("detectors", args.detector, {}, seed=args.seed)
             assert isinstance(detector, Detector)
-            got = run_part(cp.name, cp.mesh, part, detector, args.scenes, args.seed)
+            got = run_part(cp.name, cp.mesh, part, detector, args.scenes, args.seed, T_cam2=T_cam2)
             for r in got:
                 r["family"] = cp.family
-                print(f"{cp.name:24s} {r['scene']}  {describe(r)}", flush=True)
+                two = ""
+                if T_cam2 is not None and r["two_found"] != r["found"]:
+                    two = f"  | two views: {describe(_two(r))}"
+                elif T_cam2 is not None and not r["found"]:
+                    two = "  | two views: " + r["two_reason"].split(";")[0]
+                print(f"{cp.name:24s} {r['scene']}  {describe(r)}{two}", flush=True)
             rows += got
     args.out.parent.mkdir(parents=True, exist_ok=True)
     with args.out.open("w", newline="") as fh:
@@ -104,8 +151,10 @@ def main() -> None:
     print(f"\n{len(corpus)} parts, {n} scenes, {time.perf_counter() - t0:.0f} s, load {os.getloadavg()[0]:.1f}")
     print(f"found {found}/{n}; success (<= 5 mm, 5 deg) {ok}/{n} = {100.0 * ok / max(n, 1):.1f} % (target >= 95 %)")
     flagged = [r for r in wrong if r["truth_in_alternatives"]]
-    print(f"wrong poses reported as found: {len(wrong)} (target 0), of which {len(flagged)} flagged ambiguous with "
-          "the right pose among details['ambiguous']")
+    print(
+        f"wrong poses reported as found: {len(wrong)} (target 0), of which {len(flagged)} flagged ambiguous with "
+        "the right pose among details['ambiguous']"
+    )
     for r in wrong:
         note = " (flagged, truth listed)" if r["truth_in_alternatives"] else ""
         print(f"  {r['part']} scene {r['scene']}: {r['pos_mm']} mm, {r['rot_deg']} deg{note}")
@@ -116,6 +165,9 @@ def main() -> None:
             key = "ambiguous" if why.startswith("ambiguous") else re.sub(r"\d+(\.\d+)?", "N", why.split(":")[0])[:60]
             misses[key] = misses.get(key, 0) + 1
     print("not found, by reason:", dict(sorted(misses.items(), key=lambda kv: -kv[1])))
+    if T_cam2 is not None:
+        print(f"second camera at {np.round(T_cam2[:3, 3], 3).tolist()} (world, metres)")
+        print(family_table(rows))
     print(f"rows -> {args.out}")
 
 

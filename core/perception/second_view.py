@@ -305,7 +305,9 @@ def judge_rivals(
     # refined on every view, so that a neighbour a grid step away is not taken for a rival.
     seeds = list(range(len(poses))) + [int(i) for i in np.argsort(raw_total)[: s.refine_top] if i >= len(poses)]
     model = model_cloud(mesh, 4000)
-    pool = [_fused_refine(model, cands[i], usable, table) for i in seeds]
+    # the rivals as listed stay in the pool: when every refined pose falls on one, the listed rivals still
+    # have to lose by the margin (the comparison is never empty)
+    pool = [_fused_refine(model, cands[i], usable, table) for i in seeds] + cands[: len(poses)]
     costs, on_part = _all_costs(mesh, pool, usable, table, sensor, s, cands)
     best = int(np.argmin(costs.sum(axis=1)))
     cands = pool

@@ -22,9 +22,12 @@ import trimesh
 
 from asmteach.core import registry
 from asmteach.core.config import TableSettings
+from asmteach.core.detect_correct import resolve_by_views
 from asmteach.core.hooks import hookimpl
 from asmteach.core.interfaces import Detector, PartModel
+from asmteach.core.models import Detection
 from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
+from asmteach.core.perception.second_view import DepthView
 from asmteach.core.pose_error import pose_error
 from asmteach.core.rests.drops import drop_rests, likely_rests
 from asmteach.core.symmetry import equivalent_transforms
@@ -42,8 +45,9 @@ def rest_poses(mesh: trimesh.Trimesh, com: np.ndarray, min_share: float = 0.1) -
     return likely_rests(*drop_rests(mesh, com), min_share=min_share)
 
 
-def scene_pose(mesh: trimesh.Trimesh, rests: np.ndarray, probs: np.ndarray, rng: np.random.Generator,
-               table: TableSettings) -> tuple[int, float, np.ndarray]:
+def scene_pose(
+    mesh: trimesh.Trimesh, rests: np.ndarray, probs: np.ndarray, rng: np.random.Generator, table: TableSettings
+) -> tuple[int, float, np.ndarray]:
     """``(rest index, yaw rad, T_world_part)`` of one scene: a rest drawn by probability, yaw and xy uniform."""
     k = int(rng.choice(len(rests), p=probs))
     yaw = float(rng.uniform(-np.pi, np.pi))
@@ -51,9 +55,40 @@ def scene_pose(mesh: trimesh.Trimesh, rests: np.ndarray, probs: np.ndarray, rng:
     return k, yaw, place_on_table(mesh, rests[k], yaw, xy, table.height)
 
 
-def run_part(name: str, mesh: trimesh.Trimesh, part: PartModel, detector: Detector, scenes: int, seed: int,
-             tol_mm: float = 5.0, tol_deg: float = 5.0) -> list[dict]:
-    """Render ``scenes`` scenes of ``mesh`` (the truth) and detect ``part`` (as loaded) in each."""
+def _outcome(det: Detection, T_true: np.ndarray, syms: list[np.ndarray], tol_mm: float, tol_deg: float) -> dict:
+    """found / pos_mm / rot_deg / success / wrong_found / reason of one detection against the truth."""
+    out = {
+        "found": det.found,
+        "pos_mm": None,
+        "rot_deg": None,
+        "success": False,
+        "wrong_found": False,
+        "reason": det.reason or "",
+    }
+    if det.found and det.rough is not None:
+        err = pose_error(det.rough, T_true, right=syms)
+        ok = err.within(tol_mm, tol_deg)
+        out.update(pos_mm=round(err.position_mm, 2), rot_deg=round(err.angle_deg, 2), success=ok, wrong_found=not ok)
+    return out
+
+
+def run_part(
+    name: str,
+    mesh: trimesh.Trimesh,
+    part: PartModel,
+    detector: Detector,
+    scenes: int,
+    seed: int,
+    tol_mm: float = 5.0,
+    tol_deg: float = 5.0,
+    T_cam2: np.ndarray | None = None,
+) -> list[dict]:
+    """Render ``scenes`` scenes of ``mesh`` (the truth) and detect ``part`` (as loaded) in each.
+
+    ``T_cam2`` (``T_world_cam``): a second Kinect renders each scene too (its own noise seed; the first
+    view's frame is the same as without it), and the ambiguous detections are judged against its view
+    (:func:`asmteach.core.detect_correct.resolve_by_views`): the row's ``two_*`` keys hold that outcome.
+    """
     table = TableSettings()
     com = np.asarray(mesh.center_mass, float)
     rests, probs = rest_poses(mesh, com)
@@ -66,31 +101,48 @@ def run_part(name: str, mesh: trimesh.Trimesh, part: PartModel, detector: Detect
     for i in range(scenes):
         rng = np.random.default_rng([seed, i, 22])
         k, yaw, T_true = scene_pose(mesh, rests, probs, rng, table)
-        scene = render_table_scene(DepthCamera(KinectSettings(), seed=1000 * seed + i), mesh, T_true,
-                                   table=table, T_world_cam=T_cam)
+        scene = render_table_scene(
+            DepthCamera(KinectSettings(), seed=1000 * seed + i), mesh, T_true, table=table, T_world_cam=T_cam
+        )
         det = detector.detect(scene.cloud, part, viewpoint=T_cam[:3, 3])
-        row = {"part": name, "scene": i, "rest": k, "yaw_deg": round(math.degrees(yaw), 1),
-               "part_points": int((scene.frame.labels == 1).sum()), "found": det.found,
-               "pos_mm": None, "rot_deg": None, "success": False, "wrong_found": False,
-               "reason": det.reason or "", "source": det.details.get("source", ""),
-               "detect_ms": det.timing_ms.get("total"), "prepare_s": round(prep_s, 1) if i == 0 else 0.0,
-               "symmetries": len(syms)}
+        row = {
+            "part": name,
+            "scene": i,
+            "rest": k,
+            "yaw_deg": round(math.degrees(yaw), 1),
+            "part_points": int((scene.frame.labels == 1).sum()),
+            **_outcome(det, T_true, syms, tol_mm, tol_deg),
+            "source": det.details.get("source", ""),
+            "detect_ms": det.timing_ms.get("total"),
+            "prepare_s": round(prep_s, 1) if i == 0 else 0.0,
+            "symmetries": len(syms),
+        }
         alts = [np.asarray(a["T_world_part"]) for a in det.details.get("ambiguous", [])]
         row["alternatives"] = len(alts)  # hull twins the view cannot tell apart, listed with the found pose
-        row["truth_in_alternatives"] = any(
-            pose_error(T, T_true, right=syms).within(tol_mm, tol_deg) for T in alts)
-        if det.found and det.rough is not None:
-            err = pose_error(det.rough, T_true, right=syms)
-            ok = err.within(tol_mm, tol_deg)
-            row.update(pos_mm=round(err.position_mm, 2), rot_deg=round(err.angle_deg, 2), success=ok,
-                       wrong_found=not ok)
+        row["truth_in_alternatives"] = any(pose_error(T, T_true, right=syms).within(tol_mm, tol_deg) for T in alts)
+        if T_cam2 is not None:
+            other = render_table_scene(
+                DepthCamera(KinectSettings(), seed=1000 * seed + i + 500), mesh, T_true, table=table, T_world_cam=T_cam2
+            )
+            views = [DepthView(scene.cloud, T_cam[:3, 3]), DepthView(other.cloud, T_cam2[:3, 3])]
+            two = resolve_by_views(det, part, views, scene.table, syms)
+            row.update({f"two_{k}": v for k, v in _outcome(two, T_true, syms, tol_mm, tol_deg).items()})
+            judged = two.details.get("resolved_by_view") or two.details.get("second_view") or {}
+            best = judged.pop("best_T_world_part", None)
+            row["two_judgement"] = judged
+            # how far the views' cheapest pose is from the truth, refused or not: what the margin guards
+            err = None if best is None else pose_error(np.asarray(best), T_true, right=syms)
+            row["two_best_pos_mm"] = None if err is None else round(err.position_mm, 2)
+            row["two_best_rot_deg"] = None if err is None else round(err.angle_deg, 2)
+            row["two_ms"] = two.timing_ms.get("second_view")
         rows.append(row)
     return rows
 
 
 @hookimpl
-def asmteach_measure_part(part: PartModel, stage: str, seed: int, workdir: Path,
-                          options: dict[str, Any]) -> dict[str, Any] | None:
+def asmteach_measure_part(
+    part: PartModel, stage: str, seed: int, workdir: Path, options: dict[str, Any]
+) -> dict[str, Any] | None:
     """Detection on ``options["scenes"]`` seeded scenes of ``part``; ``None`` for other stages."""
     if stage != "detection":
         return None

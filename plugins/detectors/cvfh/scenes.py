@@ -22,10 +22,12 @@ from asmteach.core.perception.depth_camera import DepthCamera, DepthFrame, look_
 __all__ = [
     "DEFAULT_EYE",
     "QUARTERS",
+    "SECOND_EYE",
     "TableScene",
     "default_camera_pose",
     "place_on_table",
     "render_table_scene",
+    "second_camera_pose",
     "table_mesh",
 ]
 
@@ -33,6 +35,10 @@ DEFAULT_EYE = np.array([-0.05, 0.0, 0.70])
 """Where the scene renderer puts its Kinect by default (world, metres, above the table top). Only the
 renderer's default: the detectors have none, they are told the camera centre (a rendered frame carries it,
 :meth:`DepthFrame.write_ply`)."""
+
+SECOND_EYE = np.array([0.98, 0.0, 0.53])
+"""The scene renderer's second Kinect (world, metres, above the table top): across the table from
+:data:`DEFAULT_EYE`, looking down at the work centre at 45 deg from 0.75 m (a cell with two depth cameras)."""
 
 WORK_CENTER = np.array([0.45, 0.0])
 """Centre of the work area on the table (world x, y, metres)."""
@@ -65,6 +71,14 @@ def default_camera_pose(table: TableSettings | None = None) -> np.ndarray:
     h = table.height if table is not None else 0.0
     eye = DEFAULT_EYE + np.array([0.0, 0.0, h])
     return look_at(eye, [WORK_CENTER[0], WORK_CENTER[1], h])
+
+
+def second_camera_pose(table: TableSettings | None = None, eye: ArrayLike | None = None) -> np.ndarray:
+    """``T_world_cam`` of the second scene Kinect: at ``eye`` (default :data:`SECOND_EYE`; z above the table
+    top), looking at the work centre."""
+    h = table.height if table is not None else 0.0
+    at = (SECOND_EYE if eye is None else np.asarray(eye, dtype=float)) + np.array([0.0, 0.0, h])
+    return look_at(at, [WORK_CENTER[0], WORK_CENTER[1], h])
 
 
 SCENE_TABLE_CENTER = (0.45, 0.0)

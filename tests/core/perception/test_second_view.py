@@ -1,0 +1,143 @@
+"""A second depth view settles a D peg one view cannot: scenes rendered here with the Kinect model (noise on)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from asmteach.core import geometry
+from asmteach.core.detect_correct import detect_and_correct
+from asmteach.core.interfaces import Detector, PartModel
+from asmteach.core.models import Detection, PartSpec, TablePlane
+from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings, look_at
+from asmteach.core.perception.second_view import DepthView, axis_turns, screw_turns
+from asmteach.core.pose_error import pose_error
+from asmteach.core.symmetry import part_symmetries
+
+EYE_1 = np.array([-0.05, 0.0, 0.70])  # the robot's side of the table, as the scene Kinect
+EYE_2 = np.array([0.98, 0.0, 0.53])  # across the table, 45 deg down
+TARGET = np.array([0.45, 0.0, 0.0])
+
+
+def _d_peg(r: float = 0.015, flat: float = 0.009, length: float = 0.06) -> trimesh.Trimesh:
+    """A round peg with a flat at x = ``flat`` (its section is convex: the hull of the D outline), axis along y."""
+    a = np.linspace(0.0, 2.0 * np.pi, 96, endpoint=False)
+    ring = np.c_[r * np.cos(a), r * np.sin(a)]
+    ring = ring[ring[:, 0] <= flat]
+    half = np.sqrt(r * r - flat * flat)
+    outline = np.r_[ring, [[flat, -half], [flat, half]]]
+    pts = np.r_[
+        np.c_[outline[:, 0], np.full(len(outline), -length / 2), outline[:, 1]],
+        np.c_[outline[:, 0], np.full(len(outline), length / 2), outline[:, 1]],
+    ]
+    return trimesh.convex.convex_hull(pts)
+
+
+@pytest.fixture(scope="module")
+def peg() -> PartModel:
+    mesh = _d_peg()
+    return PartModel(PartSpec(name="d_peg", mesh="d_peg.stl"), mesh, 0.1, np.asarray(mesh.center_mass))
+
+
+def _true_pose(mesh: trimesh.Trimesh) -> np.ndarray:
+    """Lying on its round side at the work centre, the flat facing +x: away from camera 1, towards camera 2."""
+    T = np.eye(4)
+    T[:3, 3] = [0.45, 0.0, -float(mesh.bounds[0, 2])]
+    return T
+
+
+def _view(mesh: trimesh.Trimesh, T: np.ndarray, eye: np.ndarray, seed: int) -> DepthView:
+    table = trimesh.creation.box(extents=[0.8, 1.2, 0.02])
+    T_table = geometry.from_rotation(np.eye(3), [0.45, 0.0, -0.01])
+    frame = DepthCamera(KinectSettings(), seed=seed).render([(table, T_table), (mesh, T)], look_at(eye, TARGET))
+    return DepthView(frame.points_world, eye)
+
+
+def _rival(mesh: trimesh.Trimesh, T: np.ndarray, deg: float) -> np.ndarray:
+    """``T`` turned about the peg's own axis (y, through its centre of mass): the flat still out of camera 1's
+    sight for the turns used here."""
+    com = np.asarray(mesh.center_mass, float)
+    R = geometry.from_rotvec([0.0, np.radians(deg), 0.0])[:3, :3]
+    return T @ geometry.from_rotation(R, com - R @ com)
+
+
+class _Ambiguous(Detector):
+    """Says what a one-view detector says of this scene: the view is explained as well by two poses."""
+
+    def __init__(self, poses: list[np.ndarray]) -> None:
+        super().__init__()
+        self.poses = poses
+
+    def detect(
+        self, cloud: np.ndarray, part: PartModel, table: TablePlane | None = None, viewpoint: np.ndarray | None = None
+    ) -> Detection:
+        return Detection(
+            part=part.name,
+            found=False,
+            reason="ambiguous: a pose 0 mm and 35 deg away explains the view as well",
+            timing_ms={"total": 1.0},
+            details={
+                "ambiguous": [{"T_world_part": T.tolist(), "score": 0.99} for T in self.poses],
+                "ambiguous_kind": "near_twin",
+                "viewpoint": EYE_1.tolist(),
+            },
+        )
+
+
+def test_turns_about_the_rivals_screw_axis_pass_through_both() -> None:
+    T_a = geometry.from_rotation(np.eye(3), [0.4, 0.1, 0.02])
+    R = geometry.from_rotvec([0.0, 0.0, np.radians(40.0)])[:3, :3]
+    p = np.array([0.45, -0.05, 0.0])  # a vertical axis beside the part
+    T_b = geometry.from_rotation(R, p - R @ p) @ T_a
+    turns = screw_turns(T_a, T_b, 10.0)
+    assert len(turns) == 35
+    assert pose_error(turns[3], T_b).within(0.01, 0.01)  # the 40 deg turn lands on T_b
+
+
+def test_axis_turns_keep_the_centre_of_mass(peg: PartModel) -> None:
+    T = _true_pose(peg.mesh)
+    com = np.asarray(peg.mesh.center_mass)
+    turns = axis_turns(peg.mesh, T, 30.0)
+    assert len(turns) == 3 * 11
+    for Tt in turns:
+        assert np.allclose(geometry.transform_points(Tt, com[None]), geometry.transform_points(T, com[None]))
+
+
+def test_the_second_view_finds_the_d_peg_the_first_cannot_tell(peg: PartModel) -> None:
+    T_true = _true_pose(peg.mesh)
+    rival = _rival(peg.mesh, T_true, 20.0)  # the flat turned down, out of camera 1's sight
+    first = _view(peg.mesh, T_true, EYE_1, seed=1)
+    second = _view(peg.mesh, T_true, EYE_2, seed=2)
+    # the rival listed first: the second view, not the order, must decide
+    det = detect_and_correct(_Ambiguous([rival, T_true]), None, first.cloud, peg, TablePlane(), views=[second])
+    assert det.found and det.reason is None
+    err = pose_error(det.rough, T_true, right=part_symmetries(peg.mesh, peg.center_of_mass))  # end over end: the same
+    assert err.within(2.0, 3.0), err
+    judged = det.details["resolved_by_view"]
+    assert judged["winner"] == 1 and judged["views"] == 2 and judged["kind"] == "near_twin"
+    assert judged["closest_rival_gain"] >= 50.0 and judged["closest_rival_z"] >= 5.0
+    assert det.details["first_view_reason"].startswith("ambiguous")
+    # without the second view the detection is as the detector left it
+    alone = detect_and_correct(_Ambiguous([rival, T_true]), None, first.cloud, peg, TablePlane())
+    assert not alone.found and "resolved_by_view" not in alone.details
+    # and a second camera beside the first sees no more than it
+    beside = _view(peg.mesh, T_true, EYE_1 + np.array([0.0, 0.05, 0.0]), seed=3)
+    det = detect_and_correct(_Ambiguous([rival, T_true]), None, first.cloud, peg, TablePlane(), views=[beside])
+    assert not det.found and det.reason.startswith("still ambiguous after 2 views: no pose is clearly preferred")
+
+
+def test_a_flat_that_neither_camera_sees_stays_ambiguous(peg: PartModel) -> None:
+    """Resting on its flat, the peg turned a little about its round axis differs only underneath."""
+    R = geometry.from_rotvec([0.0, np.pi / 2, 0.0])[:3, :3]  # the flat (normal +x) faces down
+    T_true = geometry.from_rotation(R, [0.45, 0.0, 0.0])
+    T_true[2, 3] -= geometry.transform_points(T_true, peg.mesh.vertices)[:, 2].min()
+    centre = geometry.transform_points(T_true, [[0.0, 0.0, 0.0]])[0]  # on the round axis
+    turn = geometry.from_rotvec([0.0, np.radians(15.0), 0.0])
+    rival = geometry.from_rotation(turn[:3, :3], centre - turn[:3, :3] @ centre) @ T_true
+    first = _view(peg.mesh, T_true, EYE_1, seed=1)
+    second = _view(peg.mesh, T_true, EYE_2, seed=2)
+    det = detect_and_correct(_Ambiguous([T_true, rival]), None, first.cloud, peg, TablePlane(), views=[second])
+    assert not det.found
+    assert det.reason.startswith("still ambiguous after 2 views: no pose is clearly preferred")
+    assert det.details["second_view"]["winner"] is None and det.details["second_view"]["views"] == 2
