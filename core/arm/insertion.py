@@ -16,7 +16,11 @@ real cell inserts force-guided instead; :func:`guarded_insert` does the same on 
   search insertion does; it never pushes past ``force_limit_n`` or ``slip_limit_m``;
 - it watches the other part: how far it moved while the part came in, and when; the other part pushed more
   than ``other_moved_m`` since the last correction is resistance too (a light part slides on the table
-  before any force builds up).
+  before any force builds up);
+- given ``line_end`` (the TCP pose that puts the part, as it is measured in the hand, where the plan meant
+  it: :func:`realigned_line_end`), the same line is run re-aimed: it first turns and shifts the hand to the
+  re-aimed start, then goes in along the planned direction. A part held off the pose the plan assumed (a
+  detection 16 deg off, side_pin s0_0 seed 7) otherwise meets the rim at a tilt no sideways search frees.
 
 Units: metres, newtons, seconds (the robot's clock: the executed trajectories' own seconds). Frames: world.
 """
@@ -38,6 +42,7 @@ __all__ = [
     "InsertionSettings",
     "PartContact",
     "guarded_insert",
+    "realigned_line_end",
 ]
 
 
@@ -122,6 +127,9 @@ class InsertionOutcome:
     other_moved_m: float = 0.0
     other_moved_t_s: float | None = None
     reason: str = ""
+    realigned_mm: float = 0.0
+    realigned_deg: float = 0.0
+    """How far (mm, deg) the line's end TCP was re-aimed for the part's measured pose in the hand (0: as planned)."""
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready, in millimetres (the execution trace's unit)."""
@@ -137,6 +145,8 @@ class InsertionOutcome:
             "seconds": round(self.seconds, 3),
             "other_moved_mm": round(1000.0 * self.other_moved_m, 2),
             "other_moved_t_s": None if self.other_moved_t_s is None else round(self.other_moved_t_s, 3),
+            "realigned_mm": round(self.realigned_mm, 2),
+            "realigned_deg": round(self.realigned_deg, 2),
             "reason": self.reason,
         }
 
@@ -144,7 +154,15 @@ class InsertionOutcome:
 class _Guard:
     """Moves the TCP along (possibly shifted) insertion lines and reads the resistance after every step."""
 
-    def __init__(self, robot: Any, traj: Trajectory, part: str, other: str | None, s: InsertionSettings) -> None:
+    def __init__(
+        self,
+        robot: Any,
+        traj: Trajectory,
+        part: str,
+        other: str | None,
+        s: InsertionSettings,
+        line_end: np.ndarray | None = None,
+    ) -> None:
         self.robot, self.arm, self.part, self.other, self.s = robot, traj.arm, part, other, s
         pos = np.asarray(traj.positions, dtype=float)
         self.T_start = robot.fk(self.arm, pos[0])
@@ -152,6 +170,10 @@ class _Guard:
         delta = self.T_end[:3, 3] - self.T_start[:3, 3]
         self.length = float(np.linalg.norm(delta))
         self.d = delta / self.length if self.length > 1e-9 else np.array([0.0, 0.0, -1.0])
+        if line_end is not None:  # the same line (direction, length), re-aimed to end at line_end
+            self.T_end = np.asarray(line_end, dtype=float).copy()
+            self.T_start = self.T_end.copy()
+            self.T_start[:3, 3] = self.T_end[:3, 3] - self.length * self.d
         self.u, self.w = _perpendicular(self.d)
         T_tcp = robot.fk(self.arm, robot.current(self.arm))
         self.T_tcp_part = geometry.invert(T_tcp) @ robot.part_pose(part)  # the part in the hand now
@@ -253,24 +275,47 @@ def _spiral(k: int, pitch: float, u: np.ndarray, w: np.ndarray) -> np.ndarray:
     return r * (np.cos(theta) * u + np.sin(theta) * w)
 
 
+def realigned_line_end(T_end: np.ndarray, T_tcp_part_planned: np.ndarray, T_tcp_part_held: np.ndarray) -> np.ndarray:
+    """The TCP pose (world, metres) that puts the part held at ``T_tcp_part_held`` (measured in the hand) where
+    the planned end ``T_end`` puts it as the plan assumed it held (``T_tcp_part_planned``): ``T_end @
+    T_tcp_part_planned @ inv(T_tcp_part_held)``. Pass the planned pose as the symmetric equivalent nearest the
+    held one (a symmetric part's detection may be any of them: turning the hand by a symmetry gains nothing)."""
+    return (
+        np.asarray(T_end, dtype=float) @ np.asarray(T_tcp_part_planned, dtype=float) @ geometry.invert(T_tcp_part_held)
+    )
+
+
 def guarded_insert(
     robot: Any,
     traj: Trajectory,
     part: str,
     other: str | None = None,
     settings: InsertionSettings | None = None,
+    line_end: np.ndarray | None = None,
 ) -> InsertionOutcome:
     """Run the insertion ``traj`` (a straight TCP line holding ``part``) force-guided; see the module doc.
 
     ``robot`` is a :class:`~asmteach.core.robot.World` and :class:`~asmteach.core.interfaces.RobotModel`
     (``fk``, ``ik``, ``execute``, ``part_pose``, ``current``); ``other`` is the part inserted into (watched,
     and its contacts read when the world is :class:`ContactSensing`). The arm starts at the trajectory's start.
-    Returns the :class:`InsertionOutcome`; it never raises on a jam (the part stays where it stopped, eased
-    back to the depth where the force stayed under the limit).
+    ``line_end`` (``T_world_tcp``, from :func:`realigned_line_end`) re-aims the line: the arm first moves to
+    its start (the planned direction and length back from ``line_end``); with no IK there, the planned line
+    runs. Returns the :class:`InsertionOutcome`; it never raises on a jam (the part stays where it stopped,
+    eased back to the depth where the force stayed under the limit).
     """
     s = settings or InsertionSettings()
     g = _Guard(robot, traj, part, other, s)
+    if line_end is not None:
+        planned = robot.fk(traj.arm, np.asarray(traj.positions, dtype=float)[-1])
+        aimed = _Guard(robot, traj, part, other, s, line_end)
+        if aimed.length >= 1e-6 and aimed.move_to(aimed.pose_at(0.0, np.zeros(3))):
+            g = aimed
+            g.settle_other()  # the turn may nudge the other part: resistance counts from here
+            g.T_tcp_part = geometry.invert(robot.fk(g.arm, robot.current(g.arm))) @ robot.part_pose(part)
     out = InsertionOutcome(inserted=False, depth_m=0.0, length_m=g.length)
+    if line_end is not None:
+        out.realigned_mm = 1000.0 * geometry.translation_distance(g.T_end, planned)
+        out.realigned_deg = float(np.degrees(geometry.rotation_distance(g.T_end, planned)))
     if g.length < 1e-6:
         robot.execute(traj)
         out.inserted = True

@@ -11,16 +11,28 @@ from typing import Any
 
 import numpy as np
 
+from asmteach.core import geometry
 from asmteach.core.arm.fixture import clamp_part, jig_decision
-from asmteach.core.arm.insertion import guarded_insert
+from asmteach.core.arm.insertion import guarded_insert, realigned_line_end
 from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import Robot
-from asmteach.core.models import Plan, RunReport
+from asmteach.core.models import Plan, RunReport, Trajectory
 from asmteach.core.pipeline.causes import jam_note
+from asmteach.core.pipeline.measure import revolution_axis, untwisted
 from asmteach.core.pipeline.monitor import ExecutionTrace, plan_parts
 from asmteach.core.pipeline.stage import Run, StageFailed
+from asmteach.core.pose_error import nearest_symmetric
 
-__all__ = ["execute_stage", "write_animation"]
+__all__ = ["REALIGN_LIMIT_DEG", "REALIGN_LIMIT_MM", "execute_stage", "write_animation"]
+
+_REAIM_STEP_RAD = 0.2
+"""A re-aimed waypoint whose IK lands this far (radians, any joint) from the one before took another branch."""
+
+REALIGN_LIMIT_MM = 10.0
+REALIGN_LIMIT_DEG = 30.0
+"""A part measured in the hand farther than this (mm, deg) from where the plan believes it is held is not
+re-aimed for: the belief, not the grasp, is suspect (a part that turned over in a regrasp); the planned line
+runs guarded as it is."""
 
 
 def execute_stage(run: Run, robot: Robot, plan: Plan, stage: str = "execute") -> list[np.ndarray]:
@@ -36,15 +48,25 @@ def execute_stage(run: Run, robot: Robot, plan: Plan, stage: str = "execute") ->
                 d["animation"] = f"not recorded: {type(robot).__name__} has no colour camera"
         task = run.report.task  # the plan may move B alone (after look_again): A is watched all the same
         parts = plan_parts(plan) + ([task.part_a.name, task.part_b.name] if task is not None else [])
-        trace = ExecutionTrace(robot, list(dict.fromkeys(parts)), run.report.robot_seconds.get("total", 0.0))
+        believed = {
+            det.part: np.asarray(det.best) for det in run.report.detections if det.found and det.best is not None
+        }
+        trace = ExecutionTrace(
+            robot, list(dict.fromkeys(parts)), run.report.robot_seconds.get("total", 0.0), believed=believed
+        )
         d["trace"] = trace.events
         jig = _jig(run, plan, d)
+        aim: dict[str, np.ndarray] = {}  # arm -> the turn (world) of its TCP that re-aimed its last insertion
         for seg in plan.segments:
             if seg.trajectory is not None:
                 if jig is not None and seg.kind == "insertion":  # A is at its goal now: clamp it where it stands
                     d["jig_clamped"] = clamp_part(robot, jig)
                 trace.before_path()
-                seconds = _insert(robot, seg, trace, run.report) if seg.kind == "insertion" else None
+                seconds = None
+                if seg.kind == "insertion":
+                    seconds = _insert(run, robot, seg, trace, aim)
+                elif seg.trajectory.arm in aim:
+                    seconds = _follow_reaimed(robot, seg.trajectory, aim.pop(seg.trajectory.arm))
                 if seconds is None:
                     for chunk in _chunks(seg.trajectory, period if record else None):
                         robot.execute(chunk)
@@ -84,17 +106,71 @@ def _jig(run: Run, plan: Plan, d: dict) -> str | None:
     return task.part_a.name if decision.hold else None
 
 
-def _insert(robot: Robot, seg: Any, trace: ExecutionTrace, report: RunReport) -> float | None:
-    """Run an insertion guarded (:func:`~asmteach.core.arm.insertion.guarded_insert`) when its arm holds a part;
-    the robot seconds it took, or None when the arm holds nothing (it runs as planned). An insertion that
-    stops short fails the stage as a jam (depth, force, time)."""
+def _line_end(run: Run, robot: Robot, arm: str, part: str, trace: ExecutionTrace, T_end: np.ndarray) -> Any:
+    """The insertion's end TCP re-aimed for ``part`` as it is measured in the hand now against where the plan
+    believes it held (:func:`~asmteach.core.arm.insertion.realigned_line_end`), or None: no belief, no model of
+    the part to tell its symmetries, or a difference beyond :data:`REALIGN_LIMIT_MM` / :data:`REALIGN_LIMIT_DEG`."""
+    planned = trace.believed_in_hand.get(part)
+    if planned is None:
+        return None
+    try:
+        held = robot.scene.attached.get(arm)
+    except NotImplementedError:  # a robot that keeps no planning scene: no model of the held part
+        return None
+    if held is None or held.part.name != part:
+        return None
+    T_held = geometry.invert(robot.fk(arm, robot.current(arm))) @ robot.part_pose(part)
+    near = nearest_symmetric(planned, T_held, run.symmetries(held.part))  # a symmetric turn gains nothing
+    axis = revolution_axis(held.part)
+    if axis is not None:
+        near = untwisted(near, T_held, axis, np.asarray(held.part.center_of_mass, dtype=float))
+    off_mm = 1000.0 * geometry.translation_distance(near, T_held)
+    off_deg = float(np.degrees(geometry.rotation_distance(near, T_held)))
+    if off_mm > REALIGN_LIMIT_MM or off_deg > REALIGN_LIMIT_DEG:
+        return None
+    return realigned_line_end(T_end, near, T_held)
+
+
+def _follow_reaimed(robot: Robot, traj: Any, C: np.ndarray) -> float:
+    """Run the motion after a re-aimed insertion (the retreat) turned by the same TCP turn ``C`` (world), then
+    rejoin the plan at the motion's planned end with one joint move at the arm's speed limits: the hand leaves
+    the part the way it went in, and the plan goes on from where it expects the arm. Robot seconds taken."""
+    arm, names = traj.arm, robot.joint_names(traj.arm)
+    positions = np.asarray(traj.positions, dtype=float)
+    qs = [robot.current(arm)]
+    for q in positions[1:]:
+        ik = robot.ik(arm, C @ robot.fk(arm, q), qs[-1])
+        if not ik.success or ik.q is None or np.max(np.abs(ik.q - qs[-1])) > _REAIM_STEP_RAD:
+            qs = qs[:1]  # no IK, or another branch: rejoin from here
+            break
+        qs.append(np.asarray(ik.q, dtype=float))
+    seconds = 0.0
+    if len(qs) == len(positions):
+        robot.execute(Trajectory(arm=arm, joint_names=names, times=list(traj.times), positions=np.vstack(qs)))
+        seconds += float(traj.times[-1] - traj.times[0])
+    q0, q1 = robot.current(arm), positions[-1]
+    dt = max(1.5 * float(np.max(np.abs(q1 - q0) / np.asarray(robot.speed_limits(arm), dtype=float))), 0.05)
+    robot.execute(Trajectory(arm=arm, joint_names=names, times=[0.0, dt], positions=np.vstack([q0, q1])))
+    return seconds + dt
+
+
+def _insert(run: Run, robot: Robot, seg: Any, trace: ExecutionTrace, aim: dict[str, np.ndarray]) -> float | None:
+    """Run an insertion guarded (:func:`~asmteach.core.arm.insertion.guarded_insert`) when its arm holds a part,
+    re-aimed for the part's pose measured in the hand (:func:`_line_end`); the robot seconds it took, or None
+    when the arm holds nothing (it runs as planned). An insertion that stops short fails the stage as a jam
+    (depth, force, time)."""
+    report = run.report
     arm = seg.trajectory.arm
     part = trace.held.get(arm)
     if part is None:
         return None
     other = trace.other_part(part)
     q = np.asarray(seg.trajectory.positions)
-    outcome = guarded_insert(robot, seg.trajectory, part, other)
+    T_end = robot.fk(arm, q[-1])
+    line_end = _line_end(run, robot, arm, part, trace, T_end)
+    outcome = guarded_insert(robot, seg.trajectory, part, other, line_end=line_end)
+    if line_end is not None and (outcome.realigned_mm > 0.0 or outcome.realigned_deg > 0.0):
+        aim[arm] = line_end @ geometry.invert(T_end)
     trace.insertion(seg.label, part, other, outcome, robot.fk(arm, q[0]), robot.fk(arm, q[-1]))
     if not outcome.inserted:
         # the plan goes on from the end of the insertion: the arm is not there, and the part is not in

@@ -22,7 +22,7 @@ from asmteach.core.pipeline.stage import Run, StageFailed
 from asmteach.core.pose_error import PoseError, nearest_symmetric, pose_error
 from asmteach.core.symmetry import SymmetryFinder, axis_rotations, principal_frame
 
-__all__ = ["assembly_error", "measure_stage", "revolution_axis"]
+__all__ = ["assembly_error", "measure_stage", "revolution_axis", "untwisted"]
 
 
 def revolution_axis(part: PartModel, tol: float = 0.0005) -> np.ndarray | None:
@@ -62,11 +62,16 @@ def assembly_error(
     refs = [nearest_symmetric(np.linalg.inv(S) @ T_A_B_ref, T_A_B, sym_b) for S in (sym_a or [np.eye(4)])]
     errors = [pose_error(T_A_B, ref) for ref in refs]
     k = int(np.argmin([e.position_mm + e.angle_deg for e in errors]))
-    ref = refs[k]
-    com = np.zeros(3) if com_b is None else np.asarray(com_b, dtype=float)
-    E = np.linalg.inv(ref) @ T_A_B  # B's pose against the reference, in B's frame
-    R = axis_rotations(axis_b, np.array([_twist(E[:3, :3], axis_b)]))[0]
-    return pose_error(T_A_B, ref @ geometry.from_rotation(R, com - R @ com))
+    return pose_error(T_A_B, untwisted(refs[k], T_A_B, axis_b, com_b))
+
+
+def untwisted(T_ref: np.ndarray, T: np.ndarray, axis: np.ndarray, com: np.ndarray | None = None) -> np.ndarray:
+    """``T_ref`` turned about the part's ``axis`` of revolution through ``com`` (part frame, metres) by the
+    turn about it that ``T`` has against ``T_ref``: the same solid in the same place, nearest ``T``."""
+    c = np.zeros(3) if com is None else np.asarray(com, dtype=float)
+    E = np.linalg.inv(T_ref) @ np.asarray(T, dtype=float)  # T against the reference, in the part's frame
+    R = axis_rotations(axis, np.array([_twist(E[:3, :3], axis)]))[0]
+    return np.asarray(T_ref, dtype=float) @ geometry.from_rotation(R, c - R @ c)
 
 
 def measure_stage(

@@ -58,8 +58,18 @@ class ExecutionTrace:
     and the poses the measure stage splits the insertion error with).
     """
 
-    def __init__(self, robot: Robot, parts: list[str] | None = None, t0_s: float = 0.0) -> None:
+    def __init__(
+        self,
+        robot: Robot,
+        parts: list[str] | None = None,
+        t0_s: float = 0.0,
+        believed: dict[str, np.ndarray] | None = None,
+    ) -> None:
         self.robot = robot
+        # Where the plan believes each part is (T_world_part, from its detection), carried along by the hand that
+        # holds it: a part's measured pose in the hand against this is what the plan did not know.
+        self.believed: dict[str, np.ndarray] = {k: np.asarray(v, dtype=float) for k, v in (believed or {}).items()}
+        self.believed_in_hand: dict[str, np.ndarray] = {}  # part -> T_tcp_part as the plan believes it held
         self.parts = list(parts or [])
         self.events: list[dict[str, Any]] = []
         self.held: dict[str, str] = {}  # arm -> part
@@ -166,6 +176,8 @@ class ExecutionTrace:
         if close and part is not None:
             self.held[arm] = part
             self.T_tcp_part[part] = geometry.invert(self._tcp(arm)) @ self.robot.part_pose(part)
+            if part in self.believed:
+                self.believed_in_hand[part] = geometry.invert(self._tcp(arm)) @ self.believed[part]
             return
         part = self.held.pop(arm, None)
         if part is not None:
@@ -175,3 +187,8 @@ class ExecutionTrace:
             before["dropped_mm"] = round(float(np.linalg.norm(moved)), 2)
             before["tilted_deg"] = round(_tilt_deg(self._grip_pose, T), 2)
             self.T_released[part] = T
+            if part in self.believed_in_hand:
+                # the plan lets a part go a little above where it rests: it believes it landed (the drop seen)
+                B = self._tcp(arm) @ self.believed_in_hand.pop(part)
+                B[2, 3] += T[2, 3] - self._grip_pose[2, 3]
+                self.believed[part] = B

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from asmteach.core.arm.insertion import InsertionSettings, PartContact, guarded_insert
+from asmteach.core.arm.insertion import InsertionSettings, PartContact, guarded_insert, realigned_line_end
 from asmteach.core.interfaces import IKResult
 from asmteach.core.models import Trajectory
 
@@ -259,3 +259,23 @@ def test_a_real_peg_off_its_hole_goes_in_on_the_simulated_robot() -> None:
         seat_error = np.linalg.solve(seat, robot.part_pose("peg"))[:3, 3]
         assert np.linalg.norm(seat_error[:2]) < 0.0006 and abs(seat_error[2]) < 0.001  # in, to the seat
         assert out.other_moved_m < 0.0005
+
+
+def test_a_part_held_off_the_plans_grasp_goes_in_on_the_realigned_line() -> None:
+    """The plan believed the part held 1.2 mm off the TCP (it is at the TCP): the planned line misses the hole
+    by more than its clearance; re-aimed for the measured grasp it goes straight in, no resistance met."""
+    d = np.array([0.0, 0.0, -1.0])
+    world = _SensingHoleWorld(np.zeros(3), d, axis_point=np.array([-0.0012, 0.0, 0.0]), clearance=0.0003)
+    traj = _line(world, 0.03)
+    T_end = world.fk("a", np.asarray(traj.positions)[-1])
+    believed = np.eye(4)
+    believed[:3, 3] = [-0.0012, 0.0, 0.0]  # where the plan thought the part sat in the hand
+    line_end = realigned_line_end(T_end, believed, np.eye(4))
+    assert np.allclose(line_end[:3, 3], [-0.0012, 0.0, -0.03])
+    out = guarded_insert(world, traj, "peg", "block", line_end=line_end)
+    assert out.inserted and not out.contacts
+    assert abs(out.realigned_mm - 1.2) < 1e-6 and out.realigned_deg == 0.0
+    assert np.linalg.norm(world._off_axis(world.part)) <= 1e-9
+    # the same part on the planned line meets the rim and has to search
+    world = _SensingHoleWorld(np.zeros(3), d, axis_point=np.array([-0.0012, 0.0, 0.0]), clearance=0.0003)
+    assert guarded_insert(world, _line(world, 0.03), "peg", "block").contacts

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -87,9 +89,10 @@ def test_an_insertion_that_stops_short_fails_the_execute_stage_as_a_jam(monkeypa
     stuck.contacts = []
     report = RunReport(config={}, seed=0)
     seg = PlanSegment(label="insert peg at assembled", trajectory=_traj(1.0), kind="insertion")
-    monkeypatch.setattr(execute, "guarded_insert", lambda robot, traj, part, other: stuck)
+    monkeypatch.setattr(execute, "guarded_insert", lambda robot, traj, part, other, line_end=None: stuck)
+    run = SimpleNamespace(report=report, symmetries=lambda part: [])
     with pytest.raises(StageFailed) as failed:
-        execute._insert(world, seg, trace, report)  # type: ignore[arg-type]
+        execute._insert(run, world, seg, trace, {})  # type: ignore[arg-type]
     assert failed.value.cause is FailureCause.JAM
     assert failed.value.reason.startswith(
         "peg jammed at 6.0 of 15.0 mm depth in 'insert peg at assembled' at t = 40.0 s"
