@@ -65,7 +65,8 @@ def _sigma(mesh: trimesh.Trimesh, seen: np.ndarray, free: np.ndarray | None = No
     if free is not None:
         prep.free = free
     T = geometry.from_rotation(np.eye(3), (0.45, 0.0, 0.0))  # the part 0.45 m ahead, the camera above it
-    job = ClusterJob(geometry.transform_points(T, seen), seen, seen, seen, TablePlane(), np.array([0.0, 0.0, 0.7]))
+    world = geometry.transform_points(T, seen)
+    job = ClusterJob(world, world, world, world, TablePlane(), np.array([0.0, 0.0, 0.7]))
     return rotation_sigma_deg(T, job, prep, 0.004)
 
 
