@@ -190,10 +190,10 @@ def to_plan(
     return Plan(keyframes=keyframes or [], segments=segments, stats=all_stats)
 
 
-GRAPH_MAX_EDGES = 20000
+GRAPH_MAX_EDGES = 10000
 """Edges drawn in a regrasp graph's picture at most (besides the keyframe path's)."""
 
-GRAPH_MAX_INCHES = 30.0
+GRAPH_MAX_INCHES = 16.0
 """The picture's largest width and height, inches (110 dpi)."""
 
 
