@@ -70,6 +70,8 @@ class Rendered:
     """Marker id -> projected area of its black square, in image pixels (unoccluded)."""
     marker_mask: np.ndarray | None = None
     """``(h, w) int32`` id of the marker seen at each pixel centre, -1 where none."""
+    marker_facing: dict[int, float] = field(default_factory=dict)
+    """Marker id -> cosine between its normal and the direction from it to the camera (1: square-on)."""
     roi: tuple[int, int, int, int] = (0, 0, 0, 0)
     """``(x0, y0, x1, y1)`` of the region around the parts (image pixels)."""
     supersampled_pixels: int = 0
@@ -436,5 +438,6 @@ def render_scene(
             square = np.array([[-1, 1, 0], [1, 1, 0], [1, -1, 0], [-1, -1, 0]]) * 0.5 * m.size
             out.marker_area[m.id] = _quad_area(_project(K, square @ mk.R.T + mk.t))
             out.marker_pixels[m.id] = counts[m.id]
+            out.marker_facing[m.id] = float(-np.dot(mk.R[:, 2], mk.t) / np.linalg.norm(mk.t))
     out.image = image
     return out

@@ -81,13 +81,24 @@ def _assembly_centre(a: PartModel, b: PartModel, T_A_B: np.ndarray) -> np.ndarra
 
 
 def choose_views(
-    a: PartModel, b: PartModel, task: AssemblyTask, camera: CameraIntrinsics, distance: float, count: int = 5
+    a: PartModel,
+    b: PartModel,
+    task: AssemblyTask,
+    camera: CameraIntrinsics,
+    distance: float,
+    count: int = 5,
+    approach_length: float = 0.0,
 ) -> list[np.ndarray]:
     """``count`` viewing poses ``T_cam_A`` from which both parts show markers, mutually >= 30 deg apart.
 
     Candidate directions on a sphere around the assembly are ranked by how
     squarely and how fully (rendered visibility, occlusion by the other part
     included) each part's best two markers are seen; the worse part decides.
+    With an ``approach_length`` (metres), views where each part also keeps a
+    wholly visible marker while B is that far and half as far back along
+    ``v_a`` come first, as a person filming the approach would hold the
+    camera: a B held above A can hide A's only markers from a view that sees
+    both well once assembled (a cap over the markers beside its post).
     """
     centre = _assembly_centre(a, b, task.T_A_B)
     dirs = _fibonacci_sphere(400)
@@ -134,15 +145,29 @@ def choose_views(
         )
         scored.append((score, idx, T_cam_A))
     scored.sort(key=lambda x: -x[0])
+    approach_ok: dict[int, bool] = {}
+
+    def shows_approach(idx: int, T_cam_A: np.ndarray) -> bool:
+        if idx not in approach_ok:
+            approach_ok[idx] = all(
+                _both_parts_seen(a, b, task, T_cam_A, frac * approach_length, camera) for frac in (1.0, 0.5)
+            )
+        return approach_ok[idx]
+
     chosen: list[tuple[int, np.ndarray]] = []
-    for min_sep in (30.0, 15.0, 0.0):
-        for score, idx, T in scored:
-            if len(chosen) == count or score <= 0:
+    for need_approach in (True, False) if approach_length > 0 else (False,):
+        for min_sep in (30.0, 15.0, 0.0):
+            for score, idx, T in scored:
+                if len(chosen) == count or score <= 0:
+                    break
+                if any(j == idx for j, _ in chosen):
+                    continue
+                if all(np.degrees(np.arccos(np.clip(dirs[idx] @ dirs[j], -1, 1))) >= min_sep for j, _ in chosen) and (
+                    not need_approach or shows_approach(idx, T)
+                ):
+                    chosen.append((idx, T))
+            if len(chosen) == count:
                 break
-            if all(np.degrees(np.arccos(np.clip(dirs[idx] @ dirs[j], -1, 1))) >= min_sep for j, _ in chosen) and all(
-                j != idx for j, _ in chosen
-            ):
-                chosen.append((idx, T))
         if len(chosen) == count:
             break
     if not chosen:
@@ -150,6 +175,47 @@ def choose_views(
     while len(chosen) < count:
         chosen.append(chosen[len(chosen) % max(1, len(chosen))])
     return [T for _, T in chosen]
+
+
+def _both_parts_seen(
+    a: PartModel, b: PartModel, task: AssemblyTask, T_cam_A: np.ndarray, back: float, camera: CameraIntrinsics
+) -> bool:
+    """Whether each part shows a wholly visible marker facing the camera with B ``back`` metres back along
+    ``v_a`` from its assembled pose (the parts' mutual occlusion included)."""
+    T_A_B = task.T_A_B.copy()
+    T_A_B[:3, 3] -= back * np.asarray(task.v_a, float)
+    r = render_scene(
+        [
+            RenderObject(a.mesh, a.spec.color, a.spec.markers, T_cam_A),
+            RenderObject(b.mesh, b.spec.color, b.spec.markers, T_cam_A @ T_A_B),
+        ],
+        camera.K,
+        camera.width,
+        camera.height,
+        background=np.zeros((camera.height, camera.width, 3), np.float32),
+        supersample=1,
+    )
+
+    usable = usable_markers(r)
+    return any(m.id in usable for m in a.spec.markers) and any(m.id in usable for m in b.spec.markers)
+
+
+USABLE_FACING = 0.5
+"""A marker seen more than 60 deg off square-on is too foreshortened to detect reliably."""
+USABLE_AREA_PX = 200.0
+"""Nor is one whose black square covers fewer pixels (about 14 x 14: 2.4 px per cell of a 4x4 marker)."""
+
+
+def usable_markers(r: Rendered) -> set[int]:
+    """Ids of the markers of a rendered frame a detector can use: >= 98 % of the square unoccluded by the parts,
+    facing the camera within 60 deg and at least ``USABLE_AREA_PX`` pixels."""
+    return {
+        i
+        for i, area in r.marker_area.items()
+        if area >= USABLE_AREA_PX
+        and r.marker_pixels.get(i, 0.0) >= 0.98 * area
+        and r.marker_facing.get(i, 0.0) >= USABLE_FACING
+    }
 
 
 def _smooth_noise(rng: np.random.Generator, n: int, dims: int, amplitude: float) -> np.ndarray:
@@ -266,7 +332,8 @@ def render_demo_frames(
 ):
     """Yield ``(DemoFrame, uint8 BGR image, visible marker ids)`` for the whole demonstration."""
     rng = np.random.default_rng([seed, settings.orientation, 7001])
-    views = choose_views(a, b, task, camera, settings.distance)
+    approach = settings.approach_length if settings.approach_frames > 0 else 0.0
+    views = choose_views(a, b, task, camera, settings.distance, approach_length=approach)
     T_cam_A0 = views[settings.orientation]
     centre = _assembly_centre(a, b, task.T_A_B)
     frames = demo_poses(task, T_cam_A0, centre, settings, rng)
@@ -329,12 +396,9 @@ def _add_hands(
     assert mask is not None
     x0, y0, x1, y1 = r.roi
     roi_mask = mask[y0:y1, x0:x1]
-    # Pixels of each marker that is unoccluded by the parts (>= 98 % of its square seen).
-    pixels = {
-        i: np.flatnonzero(roi_mask == i)
-        for i, area in r.marker_area.items()
-        if area > 0 and r.marker_pixels.get(i, 0.0) >= 0.98 * area
-    }
+    # Pixels of each marker a detector can use (unoccluded by the parts, not seen edge-on): a marker seen at a
+    # grazing angle must not count as the one a hand leaves visible.
+    pixels = {i: np.flatnonzero(roi_mask == i) for i in usable_markers(r)}
 
     def visible_ids(cover: np.ndarray) -> set[int]:
         c = cover[y0:y1, x0:x1].ravel()

@@ -245,7 +245,16 @@ class ArucoTeacher(Teacher):
             try:
                 v_a, travel = separation_direction(*meshes, T_A_B, tolerance=s.collision_tolerance)
             except ValueError as exc:
-                raise UserError(f"cannot find an insertion direction: {exc}; show the approach in the frames") from None
+                before = [r for r in results if r.index < first_used]
+                seen_a = sum(r.pose_a is not None for r in before)
+                seen_b = sum(r.pose_b is not None for r in before)
+                both = sum(r.pose_a is not None and r.pose_b is not None for r in before)
+                raise UserError(
+                    f"cannot find an insertion direction: {exc}; of the {len(before)} frame(s) before the assembled "
+                    f"ones A's markers were seen in {seen_a}, B's in {seen_b}, both in {both} ({len(approach)} usable "
+                    f"as approach, at least {s.min_approach_frames} needed): show both parts' markers while B "
+                    "approaches A"
+                ) from None
             notes.append(f"v_a from geometry: least-travel free retreat ({travel * 1000:.0f} mm to clear A)")
         rejected = sorted({i for r in results for p in (r.pose_a, r.pose_b) if p for i in p.rejected_ids})
         if rejected:
