@@ -140,6 +140,13 @@ class InsertionOutcome:
             "length_mm": round(1000.0 * self.length_m, 2),
             "correction_mm": np.round(1000.0 * self.correction_m, 2).tolist(),
             "tries": len(self.contacts),
+            "contact_depth_mm": [
+                round(1000.0 * min(c.depth_m for c in self.contacts), 2),
+                round(1000.0 * max(c.depth_m for c in self.contacts), 2),
+            ]
+            if self.contacts
+            else None,
+            "max_offset_mm": round(1000.0 * max((c.offset_m for c in self.contacts), default=0.0), 2),
             "max_force_n": None if worst is None else round(worst, 1),
             "contacts": [c.as_dict() for c in self.contacts[:8]],
             "seconds": round(self.seconds, 3),

@@ -19,7 +19,15 @@ from asmteach.core.failures import FailureCause
 from asmteach.core.models import AssemblyTask, RunReport
 from asmteach.core.pose_error import nearest_symmetric
 
-__all__ = ["RELEASE_DROP_MM", "RELEASE_TILT_DEG", "SLIP_NOTE_MM", "failure_story", "insertion_error", "jam_note"]
+__all__ = [
+    "RELEASE_DROP_MM",
+    "RELEASE_TILT_DEG",
+    "SAME_DEPTH_MM",
+    "SLIP_NOTE_MM",
+    "failure_story",
+    "insertion_error",
+    "jam_note",
+]
 
 SLIP_NOTE_MM = 1.0
 """A part this far (mm) from where the hand should hold it at its release was pushed in the hand: the motion
@@ -28,6 +36,9 @@ before the release met resistance (a jam on an insertion, a collision)."""
 RELEASE_TILT_DEG = 1.0
 """A part that tilts this far (deg) as the hand lets it go settled somewhere the plan did not put it (it leans
 in its hole's clearance, slides off a support)."""
+
+SAME_DEPTH_MM = 1.0
+"""Resistance met within this depth span (mm) through sideways shifts of twice as much is not a sideways miss."""
 
 RELEASE_DROP_MM = 2.0
 """A part that drops this far (mm) as the hand lets it go fell (a placement is planned ~1 mm above its rest)."""
@@ -125,7 +136,29 @@ def jam_note(ev: dict[str, Any]) -> str:
     return (
         f"{ev['part']} jammed at {ins['depth_mm']:.1f} of {ins['length_mm']:.1f} mm depth{force} in "
         f"{ev['label']!r} at {_t(ev)} (met resistance {ins['tries']} times; sideways corrections up to "
-        f"{float(np.linalg.norm(ins['correction_mm'])):.2f} mm did not free it: {ins['reason']}{other})"
+        f"{float(np.linalg.norm(ins['correction_mm'])):.2f} mm did not free it: {ins['reason']}{other}"
+        f"{_same_depth_note(ins)}{_realigned_note(ins)})"
+    )
+
+
+def _same_depth_note(ins: dict[str, Any]) -> str:
+    """Resistance met at the same depth however far the line was shifted sideways: the part did not miss the
+    hole sideways (a search frees that) but is tilted against it or stopped by something along the line."""
+    span, shifted = ins.get("contact_depth_mm"), ins.get("max_offset_mm", 0.0)
+    if not span or ins.get("tries", 0) < 4 or span[1] - span[0] > SAME_DEPTH_MM or shifted < 2.0 * SAME_DEPTH_MM:
+        return ""
+    return (
+        f"; it met the resistance at {span[0]:.1f}-{span[1]:.1f} mm depth wherever it was shifted (up to "
+        f"{shifted:.1f} mm): not a sideways miss but a tilt against the seat or a stop along the line"
+    )
+
+
+def _realigned_note(ins: dict[str, Any]) -> str:
+    if not ins.get("realigned_mm") and not ins.get("realigned_deg"):
+        return ""
+    return (
+        f"; the line was re-aimed {ins['realigned_mm']:.1f} mm / {ins['realigned_deg']:.1f} deg for the part as "
+        "measured in the hand"
     )
 
 
