@@ -242,8 +242,11 @@ class _Scene:
         mask = np.zeros((h, w), np.uint8)
         for oi, ob in enumerate(self.objects):
             tri = _project(self.K, self.cam_v[oi])[ob.mesh.faces[self.front[oi]]] - (x0, y0)
-            cv2.fillPoly(mask, list(np.round(tri * 16).astype(np.int32)), 1, lineType=cv2.LINE_8, shift=4)
-        # fillPoly's rounding at a triangle's border is within a pixel.
+            # One triangle per call: fillPoly given many polygons fills their even-odd union, where two
+            # overlapping faces (a wall and the one behind it) cancel.
+            for t in np.round(tri * 16).astype(np.int32):
+                cv2.fillConvexPoly(mask, t, 1, lineType=cv2.LINE_8, shift=4)
+        # The fill's rounding at a triangle's border is within a pixel.
         return cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
 
     def edge_lines(self, x0: int, y0: int, seen: list[np.ndarray]) -> list[np.ndarray]:
@@ -371,8 +374,9 @@ def render_scene(
     """Draw ``objects`` over ``background`` (``(h, w, 3)`` float RGB in [0, 1]).
 
     ``light_dir_cam`` points from the scene toward the light, in the camera
-    frame (x right, y down, z forward). ``edges_only=False`` supersamples
-    every pixel of the region (the reference the default must equal).
+    frame (x right, y down, z forward). ``edges_only=False`` casts rays
+    through every pixel centre of the region and supersamples every pixel
+    (the reference the default must equal).
     Returns the image and marker visibility.
     """
     S = int(supersample)
@@ -397,8 +401,8 @@ def render_scene(
     scene = _Scene(objects, K, light / np.linalg.norm(light), ambient)
     h, w = y1 - y0, x1 - x0
     bg = image[y0:y1, x0:x1].copy()
-    # Pass 1: one ray through each pixel centre that a front face may cover.
-    inside = np.flatnonzero(scene.footprint(x0, y0, h, w))
+    # Pass 1: one ray through each pixel centre that a front face may cover (every centre for the reference).
+    inside = np.flatnonzero(scene.footprint(x0, y0, h, w) if edges_only else np.ones((h, w), bool))
     cv_, cu_ = np.divmod(inside, w)
     rgb_in, hit_in, seen = scene.look((cu_ + x0).astype(float), (cv_ + y0).astype(float))
     rgb = np.zeros((h * w, 3), np.float32)

@@ -81,3 +81,19 @@ def test_one_sample_per_pixel_is_the_pixel_centre() -> None:
     assert r.image[cy, cx].sum() > 0
     assert r.image[cy, cx + 60].sum() == 0
     assert r.marker_mask is not None and r.marker_mask[cy, cx] in (-1, 3)
+
+
+def test_faces_of_one_part_hiding_each_other() -> None:
+    # One part made of two blocks, the far one partly behind the near one: front faces of the same part
+    # overlap on the image (a cap's outer wall over its inner one), and both must be drawn where seen.
+    near = trimesh.creation.box(extents=(0.02, 0.02, 0.01))
+    far = trimesh.creation.box(extents=(0.03, 0.015, 0.01))
+    far.apply_translation((0.008, 0.004, 0.03))
+    part = trimesh.util.concatenate([near, far])
+    T = geometry.from_rotvec(np.radians([10.0, 15.0, 5.0]), np.array([0.0, 0.0, 0.4]))
+    marker = MarkerSpec(dictionary="DICT_4X4_50", id=5, size=0.012, T_part_marker=np.eye(4))
+    marker.T_part_marker[2, 3] = -0.005  # on the near block's face toward the camera, printed side toward it
+    marker.T_part_marker[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    fast, full = _both_ways([RenderObject(part, (0.7, 0.5, 0.3), [marker], T)])
+    assert np.abs(fast.image - full.image).max() < 1e-5
+    assert fast.marker_pixels[5] > 0.98 * fast.marker_area[5]
