@@ -18,7 +18,8 @@ from asmteach.plugins.detectors.aruco.camera import c615_like
 from asmteach.plugins.detectors.aruco.detect import MarkerDetector
 from asmteach.plugins.detectors.aruco.markers import marker_bits, marker_corners_part
 from asmteach.plugins.detectors.aruco.pnp import project
-from asmteach.plugins.detectors.aruco.render import INK_BLACK, PAPER_WHITE, RenderObject, render_scene
+from asmteach.plugins.detectors.aruco.raycast import INK_BLACK, PAPER_WHITE
+from asmteach.plugins.detectors.aruco.render import RenderObject, render_scene
 
 
 def _corner_errors(shifts_px: np.ndarray, roll_deg: float) -> np.ndarray:
