@@ -12,8 +12,11 @@ real cell inserts force-guided instead; :func:`guarded_insert` does the same on 
   on a world that senses contacts (:class:`ContactSensing`), the contact force between the two parts and
   where it acts;
 - on resistance short of the planned depth it backs off and shifts the line sideways (perpendicular to
-  the insertion): away from where the contact pushed, else along a spiral of growing radius, as a cell's
-  search insertion does; it never pushes past ``force_limit_n`` or ``slip_limit_m``;
+  the insertion): along the contact's lateral push, halving the step when the push turns back, the other
+  sense when one reaches the search radius (:class:`~asmteach.core.arm.insertion_search.PushSearch`: a peg
+  on a hole's rim and a cap on a post's top are pushed opposite ways), else along a spiral of growing
+  radius, as a cell's search insertion does; it
+  never pushes past ``force_limit_n`` or ``slip_limit_m``;
 - it watches the other part: how far it moved while the part came in, and when; the other part pushed more
   than ``other_moved_m`` since the last correction is resistance too (a light part slides on the table
   before any force builds up);
@@ -33,6 +36,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from asmteach.core import geometry
+from asmteach.core.arm.insertion_search import PushSearch
 from asmteach.core.models import Trajectory
 
 __all__ = [
@@ -329,6 +333,7 @@ def guarded_insert(
         return out
     offset = np.zeros(3)
     pos, best_depth, tries, spiral_k = 0.0, 0.0, 0, 0
+    search = PushSearch(s.search_step_m, s.search_radius_m)
     steps = max(1, int(np.ceil(g.length / s.step_m)))
     while True:
         target = min(g.length, pos + g.length / steps)
@@ -355,9 +360,8 @@ def guarded_insert(
         # back off (the hand's spring lets go of the part), then shift the line sideways
         pos = max(0.0, pos - s.backoff_m - slip)
         g.move_to(g.pose_at(pos, offset))
-        if away is not None:
-            new = offset + s.search_step_m * away
-        else:
+        new = search.next(offset, away)
+        if new is None:
             spiral_k += 1
             new = _spiral(spiral_k, s.search_step_m, g.u, g.w)
         if np.linalg.norm(new) > s.search_radius_m:

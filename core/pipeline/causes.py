@@ -38,7 +38,8 @@ RELEASE_TILT_DEG = 1.0
 in its hole's clearance, slides off a support)."""
 
 SAME_DEPTH_MM = 1.0
-"""Resistance met within this depth span (mm) through sideways shifts of twice as much is not a sideways miss."""
+"""Resistance met within this depth span (mm) through sideways shifts of twice as much is named: the search
+changed nothing in where the part stopped."""
 
 RELEASE_DROP_MM = 2.0
 """A part that drops this far (mm) as the hand lets it go fell (a placement is planned ~1 mm above its rest)."""
@@ -142,14 +143,13 @@ def jam_note(ev: dict[str, Any]) -> str:
 
 
 def _same_depth_note(ins: dict[str, Any]) -> str:
-    """Resistance met at the same depth however far the line was shifted sideways: the part did not miss the
-    hole sideways (a search frees that) but is tilted against it or stopped by something along the line."""
+    """Resistance met at the same depth however far the line was shifted sideways: the search moved the part
+    but nothing it tried changed where it stopped (a rim it never crossed into, a tilt, a stop)."""
     span, shifted = ins.get("contact_depth_mm"), ins.get("max_offset_mm", 0.0)
     if not span or ins.get("tries", 0) < 4 or span[1] - span[0] > SAME_DEPTH_MM or shifted < 2.0 * SAME_DEPTH_MM:
         return ""
     return (
-        f"; it met the resistance at {span[0]:.1f}-{span[1]:.1f} mm depth wherever it was shifted (up to "
-        f"{shifted:.1f} mm): not a sideways miss but a tilt against the seat or a stop along the line"
+        f"; it met the resistance at {span[0]:.1f}-{span[1]:.1f} mm depth through every shift (up to {shifted:.1f} mm)"
     )
 
 

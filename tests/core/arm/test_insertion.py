@@ -279,3 +279,27 @@ def test_a_part_held_off_the_plans_grasp_goes_in_on_the_realigned_line() -> None
     # the same part on the planned line meets the rim and has to search
     world = _SensingHoleWorld(np.zeros(3), d, axis_point=np.array([-0.0012, 0.0, 0.0]), clearance=0.0003)
     assert guarded_insert(world, _line(world, 0.03), "peg", "block").contacts
+
+
+class _SensingCapWorld(_HoleWorld):
+    """A cap lowered onto a post: off the axis it rests on the post's top on the side nearest the axis, so the
+    contact pushes it farther off (the opposite of a peg on a hole's rim)."""
+
+    def part_contact(self, part: str, other: str) -> PartContact:
+        force = self._force()
+        if force <= 0.0:
+            return PartContact(0.0, None, self.part.copy())
+        off = self._off_axis(self.part)
+        return PartContact(force, self.part - 0.005 * off / np.linalg.norm(off), self.part.copy())
+
+
+@pytest.mark.parametrize("world_type", [_SensingHoleWorld, _SensingCapWorld])
+@pytest.mark.parametrize("miss_mm", [0.3, 1.0, 2.1])
+def test_a_play_narrower_than_the_search_step_is_found_whichever_way_the_contact_pushes(
+    world_type: type[_HoleWorld], miss_mm: float
+) -> None:
+    u = np.array([0.6, 0.8, 0.0])
+    world = world_type(np.zeros(3), np.array([0.0, 0.0, -1.0]), axis_point=1e-3 * miss_mm * u, clearance=0.00013)
+    out = guarded_insert(world, _line(world, 0.03), "peg", "block")
+    assert out.inserted and np.linalg.norm(world._off_axis(world.part)) <= 0.00013
+    assert len(out.contacts) <= InsertionSettings().max_tries

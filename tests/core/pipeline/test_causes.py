@@ -53,14 +53,14 @@ def test_a_guarded_insertion_that_did_not_get_in_is_a_jam_with_depth_force_and_t
     assert cause is FailureCause.OFF_GOAL and text.startswith("no execution event explains it")
 
 
-def test_a_jam_at_the_same_depth_wherever_it_shifted_is_named_a_tilt_or_a_stop_not_a_miss() -> None:
+def test_a_jam_at_the_same_depth_through_every_shift_says_so() -> None:
     ev = _jam(False)
     ev["insertion"].update(contact_depth_mm=[20.39, 20.95], max_offset_mm=2.35)
     text, _, _ = failure_story(_report(ev), None)
-    assert "met the resistance at 20.4-20.9 mm depth wherever it was shifted (up to 2.4 mm)" in text
+    assert "met the resistance at 20.4-20.9 mm depth through every shift (up to 2.4 mm)" in text
     # resistance that moved with the shifts (a rim it slid along) says nothing of the kind
     ev["insertion"].update(contact_depth_mm=[4.96, 11.67])
-    assert "wherever it was shifted" not in failure_story(_report(ev), None)[0]
+    assert "through every shift" not in failure_story(_report(ev), None)[0]
     ev["insertion"].update(realigned_mm=6.01, realigned_deg=16.0)
     assert "re-aimed 6.0 mm / 16.0 deg for the part as measured in the hand" in failure_story(_report(ev), None)[0]
 
