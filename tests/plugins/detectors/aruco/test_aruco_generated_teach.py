@@ -16,6 +16,8 @@ import pytest
 from asmteach.core.parts import load_structure
 from asmteach.core.pose_error import pose_error
 from asmteach.core.structure_corpus import generate_structure, write_structure
+from asmteach.plugins.detectors.aruco.render import Rendered
+from asmteach.plugins.detectors.aruco.scene import usable_markers
 from asmteach.plugins.detectors.aruco.teacher import ArucoTeacher
 
 
@@ -31,3 +33,14 @@ def test_cap_on_post_is_taught_from_its_approach(seed: int, tmp_path) -> None:
     assert learned.evidence is not None and learned.evidence.insertion_source == "demonstration"
     v_err = np.degrees(np.arccos(np.clip(np.dot(learned.v_a, task.v_a) / np.linalg.norm(task.v_a), -1.0, 1.0)))
     assert v_err < 2.0, v_err
+
+
+def test_only_whole_square_on_markers_count_as_usable() -> None:
+    # 1: whole and square-on; 2: whole but seen 73 deg off square-on; 3: too few pixels; 4: 20 % hidden by a part.
+    r = Rendered(
+        image=np.zeros((2, 2, 3), np.float32),
+        marker_pixels={1: 900.0, 2: 300.0, 3: 150.0, 4: 800.0},
+        marker_area={1: 900.0, 2: 300.0, 3: 150.0, 4: 1000.0},
+        marker_facing={1: 0.9, 2: 0.3, 3: 0.9, 4: 0.9},
+    )
+    assert usable_markers(r) == {1}
