@@ -132,9 +132,16 @@ class ViewDatabase:
         with np.load(path, allow_pickle=False) as z:
             db = cls(key=str(z["key"]), **{k: z[k] for k in _ARRAYS})
         n_regions = len(db.hists)
-        if (db.hists.ndim != 2 or len(db.region_view) != n_regions or len(db.region_centroids) != n_regions
-                or not all(np.all(np.isfinite(getattr(db, k))) for k in _ARRAYS)):
-            raise ValueError("the arrays do not fit together (or hold NaN)")
+        if db.hists.ndim != 2 or len(db.region_view) != n_regions or len(db.region_centroids) != n_regions:
+            raise ValueError("the arrays do not fit together")
+        # A view too small to describe is left out with a NaN centroid and no region (build_views): only the
+        # described views' centroids must be finite. Rejecting every NaN rebuilt such a part's database on
+        # every load (ff_lower_leg3 of the corpus, 8 of its 42 views left out).
+        left_out = ~np.isin(np.arange(len(db.centroids)), db.region_view)
+        if not np.all(np.isfinite(db.centroids[~left_out])) or not all(
+            np.all(np.isfinite(getattr(db, k))) for k in _ARRAYS if k != "centroids"
+        ):
+            raise ValueError("the arrays hold NaN")
         return db
 
 

@@ -183,3 +183,28 @@ def test_cluster_width_of_degenerate_clusters() -> None:
     line = np.column_stack([np.linspace(0.0, 0.03, 5), np.linspace(0.0, 0.04, 5), np.zeros(5)])
     assert _width(line) == pytest.approx(0.05, abs=1e-9)
     assert _width(line[:2]) == pytest.approx(0.0125, abs=1e-9)
+
+
+def test_a_database_with_views_left_out_loads_from_its_cache(tmp_path: Path) -> None:
+    """A view too small to describe has a NaN centroid and no region: its database is read back, not rebuilt
+    on every load; a NaN in a described view still makes it unreadable."""
+    from dataclasses import replace
+
+    from asmteach.plugins.detectors.cvfh.views import ViewDatabase
+
+    hists = np.full((3, 308), 1.0 / 308)
+    db = ViewDatabase(
+        key="k",
+        T_acam_part=np.tile(np.eye(4), (3, 1, 1)),
+        centroids=np.array([[0.0, 0.0, 0.8], [np.nan] * 3, [0.0, 0.0, 0.8]]),
+        crh=np.zeros((3, 90)),
+        hists=hists,
+        region_view=np.array([0, 2, 2]),
+        region_centroids=np.zeros((3, 3)),
+        view_dirs=np.tile([0.0, 0.0, 1.0], (3, 1)),
+    )
+    back = ViewDatabase.load(db.save(tmp_path / "k.npz"))
+    assert np.isnan(back.centroids[1]).all() and np.array_equal(back.region_view, [0, 2, 2])
+    bad = replace(db, centroids=np.array([[np.nan] * 3, [np.nan] * 3, [0.0, 0.0, 0.8]]))
+    with pytest.raises(ValueError, match="NaN"):
+        ViewDatabase.load(bad.save(tmp_path / "bad.npz"))
