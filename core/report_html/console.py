@@ -30,6 +30,8 @@ def format_summary(report: RunReport) -> str:
         lines = [f"{name} (seed {report.seed}): FAILED at {report.failed_stage or '?'}"]
         cause = f" ({report.failure_cause.value})" if report.failure_cause is not None else ""
         lines.append(f"  reason{cause}: {report.reason or 'not recorded'}")
+    # a plan that relies on a jig says so (asmteach.core.arm.fixture)
+    lines += [f"  jig: {s.details['jig']}" for s in report.stages if s.details.get("jig")]
     if report.stages:
         lines.append("stages:")
         stages = report.stages[:8]
