@@ -13,7 +13,7 @@ from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import AssemblyProblem, PartModel, Robot
 from asmteach.core.io import to_jsonable, write_model
 from asmteach.core.models import AssemblyTask, Detection, Plan, TablePlane
-from asmteach.core.pipeline.detect import not_found_cause, sense
+from asmteach.core.pipeline.detect import not_found_cause, sense_views
 from asmteach.core.pipeline.stage import Run, StageFailed
 from asmteach.core.pose_error import nearest_symmetric, pose_error
 
@@ -110,9 +110,18 @@ def look_again_stage(
     ex = run.execution
     with run.stage("look_again") as d:
         detector = run.plugin("detector")
-        _, cloud, viewpoint = sense(robot, ex.depth_frames)
+        _, views = sense_views(robot, ex.depth_frames)  # every camera: a second one may settle an ambiguity
         corrector = run.plugin("corrector") if run.cfg.corrector is not None else None
-        det = detect_and_correct(detector, corrector, cloud, a, table, viewpoint=viewpoint)
+        det = detect_and_correct(
+            detector,
+            corrector,
+            views[0].cloud,
+            a,
+            table,
+            viewpoint=views[0].viewpoint,
+            views=views[1:],
+            symmetries=run.symmetries(a),
+        )
         if not det.found or det.rough is None:
             if detections[a.name].details.get("ambiguous"):
                 # The first detection was ambiguous, so going on blind is a guess; the cause is the detection
