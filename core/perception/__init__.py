@@ -7,6 +7,7 @@
   :mod:`~asmteach.core.perception.segment_score` scores such labels);
 - :mod:`~asmteach.core.perception.registration`: ICP refinement and hypothesis verification;
 - :mod:`~asmteach.core.perception.viewpoint`: the camera centre a detection uses, and its stage clock;
+- :mod:`~asmteach.core.perception.second_view`: other depth views judge the rival poses one view left ambiguous;
 - :mod:`~asmteach.core.perception.open3d_tools`: Open3D point clouds and its thread limit.
 
 Frames: world (metres, z up) unless a docstring says otherwise.
