@@ -40,6 +40,7 @@ from asmteach.core.arm.insertion_search import PushSearch
 from asmteach.core.models import Trajectory
 
 __all__ = [
+    "SIDEWAYS_SHARE",
     "ContactSensing",
     "InsertionContact",
     "InsertionOutcome",
@@ -53,11 +54,21 @@ __all__ = [
 @dataclass(frozen=True)
 class PartContact:
     """The contact between two parts: total normal force (N) and its force-weighted point (world, metres),
-    with the first part's centre of mass (world, metres) to say on which side of it the contact acts."""
+    with the first part's centre of mass (world, metres) to say on which side of it the contact acts, and the
+    total force on the first part (``force_world``, world, newtons: each normal force along its normal; None
+    when the world does not say)."""
 
     force_n: float
     point_world: np.ndarray | None
     com_world: np.ndarray
+    force_world: np.ndarray | None = None
+
+
+SIDEWAYS_SHARE = 0.1
+"""A contact force whose component across the insertion line is at least this share of the contact's normal
+force pushes the part that way (a rim's edge, a chamfer, a cap's mouth on a post's edge): the guard shifts the
+line along it, as a compliant wrist would yield; a smaller share says nothing, and the side of the part the
+contact acts on is read instead."""
 
 
 @runtime_checkable
@@ -249,7 +260,11 @@ class _Guard:
         if self.other is not None and isinstance(self.robot, ContactSensing):
             c = self.robot.part_contact(self.part, self.other)
             force = c.force_n
-            if c.point_world is not None:
+            if c.force_world is not None and c.force_n > 0.0:
+                push = c.force_world - np.dot(c.force_world, self.d) * self.d
+                n = float(np.linalg.norm(push))
+                away = push / n if n >= SIDEWAYS_SHARE * c.force_n else None
+            if away is None and c.point_world is not None:
                 lateral = c.point_world - c.com_world
                 lateral -= np.dot(lateral, self.d) * self.d
                 n = float(np.linalg.norm(lateral))

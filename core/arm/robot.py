@@ -312,9 +312,10 @@ class ArmRobot(Robot, World):
         return self.sim.part_pose(name)
 
     def part_contact(self, part: str, other: str) -> PartContact:
-        """The contact between two parts now: total normal force (N), its force-weighted point on ``part``
-        and ``part``'s centre of mass (world, metres); what :func:`~asmteach.core.arm.insertion.guarded_insert`
-        reads (:class:`~asmteach.core.arm.insertion.ContactSensing`)."""
+        """The contact between two parts now: total normal force (N), its force-weighted point on ``part``,
+        ``part``'s centre of mass (world, metres) and the total force on ``part`` (world, N); what
+        :func:`~asmteach.core.arm.insertion.guarded_insert` reads
+        (:class:`~asmteach.core.arm.insertion.ContactSensing`)."""
         sim = self.sim
         for name in (part, other):
             if name not in sim.parts:
@@ -326,7 +327,9 @@ class ArmRobot(Robot, World):
         if force <= 1e-9:
             return PartContact(force, None, com)
         where = sum(c[9] * np.asarray(c[5], dtype=float) for c in points) / force
-        return PartContact(force, where, com)
+        # contactNormalOnB points from the other part to ``part``: each normal force pushes ``part`` along it
+        push = sum(c[9] * np.asarray(c[7], dtype=float) for c in points)
+        return PartContact(force, where, com, np.asarray(push, dtype=float))
 
     def camera_pose(self, view: int = 0) -> np.ndarray:
         """``T_world_cam`` (OpenCV frame) of depth camera ``view`` (0: the one the RGB camera shares)."""

@@ -303,3 +303,26 @@ def test_a_play_narrower_than_the_search_step_is_found_whichever_way_the_contact
     out = guarded_insert(world, _line(world, 0.03), "peg", "block")
     assert out.inserted and np.linalg.norm(world._off_axis(world.part)) <= 0.00013
     assert len(out.contacts) <= InsertionSettings().max_tries
+
+
+class _ForceCapWorld(_SensingCapWorld):
+    """The cap world whose contact also reports its force: the post's edge pushes the cap toward the axis and
+    up (a rim's edge normal), while the contact acts on the cap's side nearest the axis."""
+
+    def part_contact(self, part: str, other: str) -> PartContact:
+        c = super().part_contact(part, other)
+        if c.point_world is None:
+            return c
+        off = self._off_axis(self.part)
+        push = c.force_n * (-0.5 * off / np.linalg.norm(off) - 0.8 * self.d)
+        return PartContact(c.force_n, c.point_world, c.com_world, push)
+
+
+def test_a_contact_force_with_a_sideways_share_is_followed_before_the_side_it_acts_on() -> None:
+    d = np.array([0.0, 0.0, -1.0])
+    axis_point = 0.001 * np.array([0.6, 0.8, 0.0])
+    forced = _ForceCapWorld(np.zeros(3), d, axis_point=axis_point, clearance=0.00013)
+    out = guarded_insert(forced, _line(forced, 0.03), "peg", "block")
+    assert out.inserted and len(out.contacts) <= 5
+    blind = _SensingCapWorld(np.zeros(3), d, axis_point=axis_point, clearance=0.00013)
+    assert len(guarded_insert(blind, _line(blind, 0.03), "peg", "block").contacts) > len(out.contacts)
