@@ -17,8 +17,8 @@ from asmteach.core.parts import load_structure
 from asmteach.core.pose_error import pose_error
 from asmteach.core.structure_corpus import generate_structure, write_structure
 from asmteach.plugins.detectors.aruco.render import Rendered
-from asmteach.plugins.detectors.aruco.scene import usable_markers
 from asmteach.plugins.detectors.aruco.teacher import ArucoTeacher
+from asmteach.plugins.detectors.aruco.views import usable_markers
 
 
 @pytest.mark.slow  # ~5 s CPU per seed, much longer on a loaded machine

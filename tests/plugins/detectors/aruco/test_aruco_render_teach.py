@@ -13,8 +13,9 @@ from asmteach.plugins.detectors.aruco.camera import c615_like
 from asmteach.plugins.detectors.aruco.detect import MarkerDetector
 from asmteach.plugins.detectors.aruco.pnp import MarkerObservation, project, solve_part_pose
 from asmteach.plugins.detectors.aruco.render import RenderObject, render_scene
-from asmteach.plugins.detectors.aruco.scene import DemoSettings, choose_views, render_demo_frames
+from asmteach.plugins.detectors.aruco.scene import DemoSettings, render_demo_frames
 from asmteach.plugins.detectors.aruco.teacher import ArucoTeacher
+from asmteach.plugins.detectors.aruco.views import choose_views
 
 ROOT = Path(__file__).resolve().parents[4]
 PEG = ROOT / "configs/parts/set1/peg_in_hole.yaml"
@@ -31,9 +32,14 @@ def _clean_frame(peg, view: int = 0):
     T_cam_A = choose_views(a, b, task, cam, 0.4)[view]
     T_cam_B = T_cam_A @ task.T_A_B
     r = render_scene(
-        [RenderObject(a.mesh, a.spec.color, a.spec.markers, T_cam_A),
-         RenderObject(b.mesh, b.spec.color, b.spec.markers, T_cam_B)],
-        cam.K, cam.width, cam.height, background=np.full((cam.height, cam.width, 3), 0.45, np.float32),
+        [
+            RenderObject(a.mesh, a.spec.color, a.spec.markers, T_cam_A),
+            RenderObject(b.mesh, b.spec.color, b.spec.markers, T_cam_B),
+        ],
+        cam.K,
+        cam.width,
+        cam.height,
+        background=np.full((cam.height, cam.width, 3), 0.45, np.float32),
     )
     img = (np.clip(r.image, 0, 1) * 255 + 0.5).astype(np.uint8)[..., ::-1]
     return img, T_cam_A, T_cam_B, r
@@ -53,8 +59,11 @@ def test_edge_refined_corners_are_subpixel_exact_and_pnp_recovers_pose(peg) -> N
     found = MarkerDetector(["DICT_4X4_50"]).detect(img)
     errs, grazing = [], []
     for part, T in ((a, T_cam_A), (b, T_cam_B)):
-        obs = [MarkerObservation(m.id, m.size, m.T_part_marker, found[(m.dictionary, m.id)])
-               for m in part.spec.markers if (m.dictionary, m.id) in found]
+        obs = [
+            MarkerObservation(m.id, m.size, m.T_part_marker, found[(m.dictionary, m.id)])
+            for m in part.spec.markers
+            if (m.dictionary, m.id) in found
+        ]
         assert obs, f"no marker of {part.name} detected"
         for o in obs:
             err = np.linalg.norm(o.corners_px - project(T, o.object_points, cam.K, cam.dist_array), axis=1)
