@@ -95,3 +95,11 @@ def test_a_belief_far_off_the_measured_grasp_is_not_followed() -> None:
     peg = _peg(4)
     hand, trace, run = _picked(peg, geometry.from_rpy(0.0, np.radians(45.0), 0.0))  # 45 deg: no symmetry
     assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4)) is None  # type: ignore[arg-type]
+
+
+def test_a_grasp_within_the_searchs_reach_of_the_belief_runs_the_planned_line() -> None:
+    peg = _peg(4)
+    hand, trace, run = _picked(peg, geometry.from_rpy(0.0, 0.0, 0.0, (0.00015, 0.0, 0.0)))  # 0.15 mm off
+    assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4)) is None  # type: ignore[arg-type]
+    hand, trace, run = _picked(peg, geometry.from_rpy(0.0, 0.0, 0.0, (0.0003, 0.0, 0.0)))  # 0.3 mm off
+    assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4)) is not None  # type: ignore[arg-type]
