@@ -60,6 +60,7 @@ class SecondViewSettings(StrictModel):
     )
     margin: float = Field(0.01, ge=0.0, description="rays passing this far (metres) around the part are judged")
     step_deg: float = Field(10.0, gt=0.0, le=90.0, description="turns about the rivals' screw axis tried, degrees")
+    turned_rivals: int = Field(3, ge=1, description="the first this many rivals are turned all round")
     refine_top: int = Field(8, ge=1, description="cheapest grid candidates refined and compared with the rivals")
     distinct_mm: float = Field(5.0, gt=0.0, description="a candidate this far from the winner must lose, mm")
     distinct_deg: float = Field(5.0, gt=0.0, description="... or turned this far from it, degrees")
@@ -290,9 +291,11 @@ def judge_rivals(
         return ViewJudgement(None, [], [], [], 0.0, 0, "fewer than two views with a camera centre")
     syms = _symmetries_of(mesh) if symmetries is None else np.asarray(symmetries, float).reshape(-1, 4, 4)
     cands = [np.asarray(T, float) for T in poses]
-    for T in poses[1:]:
+    # turns of the leading rivals only: a hull-twin ambiguity may list dozens of poses (a soccer ball), and
+    # turning each of them all round cost minutes of ray casting for nothing the listed poses do not cover
+    for T in poses[1 : s.turned_rivals]:
         cands += screw_turns(cands[0], np.asarray(T, float), s.step_deg)
-    for T in poses:
+    for T in poses[: s.turned_rivals]:
         cands += axis_turns(mesh, np.asarray(T, float), s.step_deg)
     center = np.asarray(mesh.bounds, float).mean(axis=0)
     radius = float(np.max(np.linalg.norm(np.asarray(mesh.vertices, float) - center, axis=1))) + s.margin
