@@ -23,13 +23,14 @@ def _world(settings: dict) -> object:
 
 @pytest.mark.slow
 def test_the_second_camera_sees_the_box_from_beside_and_the_first_is_unchanged() -> None:
-    with _world({}) as two, _world({"second_camera": None}) as one:
+    side = {"eye": [0.45, -0.8, 0.6], "target": [0.45, 0.0, 0.0]}
+    with _world({"second_camera": side}) as two, _world({}) as one:
         assert two.depth_views() == 2 and one.depth_views() == 1
         assert np.allclose(two.camera_pose(1)[:3, 3], [0.45, -0.8, 0.6])
-        _, side = two.sense_depth(view=1)
-        near_box = np.linalg.norm(side[:, :2] - [0.45, 0.0], axis=1) < 0.045
+        _, seen = two.sense_depth(view=1)
+        near_box = np.linalg.norm(seen[:, :2] - [0.45, 0.0], axis=1) < 0.045
         # beside the table it sees the box's -y face, which the first camera (across the table) does not
-        face = near_box & (np.abs(side[:, 1] + 0.03) < 0.004) & (side[:, 2] > 0.005)
+        face = near_box & (np.abs(seen[:, 1] + 0.03) < 0.004) & (seen[:, 2] > 0.005)
         assert face.sum() > 200
         depth_two, cloud_two = two.sense_depth()
         depth_one, cloud_one = one.sense_depth()
