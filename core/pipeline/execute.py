@@ -17,7 +17,9 @@ from asmteach.core.arm.insertion import guarded_insert, realigned_line_end
 from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import Robot
 from asmteach.core.models import Plan, RunReport, Trajectory
+from asmteach.core.perception.in_hand import measure_held_pose
 from asmteach.core.pipeline.causes import jam_note
+from asmteach.core.pipeline.detect import sense_views
 from asmteach.core.pipeline.measure import revolution_axis, untwisted
 from asmteach.core.pipeline.monitor import ExecutionTrace, plan_parts
 from asmteach.core.pipeline.stage import Run, StageFailed
@@ -119,10 +121,42 @@ def _jig(run: Run, plan: Plan, d: dict) -> str | None:
     return task.part_a.name if decision.hold else None
 
 
-def _line_end(run: Run, robot: Robot, arm: str, part: str, trace: ExecutionTrace, T_end: np.ndarray) -> Any:
-    """The insertion's end TCP re-aimed for ``part`` as it is measured in the hand now against where the plan
-    believes it held (:func:`~asmteach.core.arm.insertion.realigned_line_end`), or None: no belief, no model of
-    the part to tell its symmetries, or a difference beyond :data:`REALIGN_LIMIT_MM` / :data:`REALIGN_LIMIT_DEG`."""
+def _measure_in_hand(run: Run, robot: Robot, arm: str, part: str, trace: ExecutionTrace) -> np.ndarray | None:
+    """``T_world_part`` of the part ``arm`` holds as the depth cameras see it now
+    (:func:`~asmteach.core.perception.in_hand.measure_held_pose`, from where the plan believes it is), or None:
+    no belief, no model of the part, no camera, or a measurement that is not sure. What was measured, or why
+    not, is an event of the trace (``"measure in hand"``). No simulator truth is read: a real cell can do the same."""
+    planned = trace.believed_in_hand.get(part)
+    if planned is None:
+        return None
+    try:
+        held = robot.scene.attached.get(arm)
+        obstacles = robot.scene.obstacles
+    except NotImplementedError:  # a robot that keeps no planning scene: no model of the held part
+        return None
+    if held is None or held.part.name != part:
+        return None
+    T_guess = robot.fk(arm, robot.current(arm)) @ planned
+    meshes = {ob.name: ob for ob in obstacles}
+    others = [(meshes[n].mesh, T) for n, T in trace.believed.items() if n != part and n in meshes]
+    try:
+        _, views = sense_views(robot, run.execution.depth_frames)
+    except NotImplementedError:  # no depth camera
+        return None
+    got = measure_held_pose(
+        [v.cloud for v in views], held.part.mesh, T_guess, others=others, table_height=run.cfg.table.height
+    )
+    trace.events.append({"label": "measure in hand", "part": part, "t_s": round(trace.t_s, 3), **got.short()})
+    return got.T_world_part
+
+
+def _line_end(
+    run: Run, robot: Robot, arm: str, part: str, trace: ExecutionTrace, T_end: np.ndarray, T_world_held: np.ndarray
+) -> Any:
+    """The insertion's end TCP re-aimed for ``part`` as it was measured in the hand (``T_world_held``) against
+    where the plan believes it held (:func:`~asmteach.core.arm.insertion.realigned_line_end`), or None: no
+    belief, no model of the part to tell its symmetries, or a difference beyond :data:`REALIGN_LIMIT_MM` /
+    :data:`REALIGN_LIMIT_DEG`."""
     planned = trace.believed_in_hand.get(part)
     if planned is None:
         return None
@@ -132,7 +166,7 @@ def _line_end(run: Run, robot: Robot, arm: str, part: str, trace: ExecutionTrace
         return None
     if held is None or held.part.name != part:
         return None
-    T_held = geometry.invert(robot.fk(arm, robot.current(arm))) @ robot.part_pose(part)
+    T_held = geometry.invert(robot.fk(arm, robot.current(arm))) @ T_world_held
     near = nearest_symmetric(planned, T_held, run.symmetries(held.part))  # a symmetric turn gains nothing
     axis = revolution_axis(held.part)
     if axis is not None:
@@ -182,7 +216,8 @@ def _insert(run: Run, robot: Robot, seg: Any, trace: ExecutionTrace, aim: dict[s
     other = trace.other_part(part)
     q = np.asarray(seg.trajectory.positions)
     T_end = robot.fk(arm, q[-1])
-    line_end = _line_end(run, robot, arm, part, trace, T_end)
+    measured = _measure_in_hand(run, robot, arm, part, trace)
+    line_end = None if measured is None else _line_end(run, robot, arm, part, trace, T_end, measured)
     outcome = guarded_insert(robot, seg.trajectory, part, other, line_end=line_end)
     if line_end is not None and (outcome.realigned_mm > 0.0 or outcome.realigned_deg > 0.0):
         aim[arm] = line_end @ geometry.invert(T_end)

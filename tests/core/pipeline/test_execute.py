@@ -81,7 +81,7 @@ def test_an_insertion_is_re_aimed_for_the_measured_grasp_but_not_for_a_symmetric
         believed = geometry.from_rpy(0.0, 0.0, 0.0, (0.001, 0.0, 0.0)) @ _turn_z(turn_deg, com) @ tilt
         hand, trace, run = _picked(peg, believed)
         T_end = geometry.from_rpy(0.0, 0.0, 0.0, (0.0, 0.0, -0.03))
-        line_end = execute._line_end(run, hand, "a", "peg", trace, T_end)  # type: ignore[arg-type]
+        line_end = execute._line_end(run, hand, "a", "peg", trace, T_end, hand.part_pose("peg"))  # type: ignore[arg-type]
         assert line_end is not None
         # the peg (measured at the TCP) ends where the plan meant it: its centre of mass and axis on the seat's,
         # and the hand turned by the 3 deg tilt only, not by the turn about the axis
@@ -94,12 +94,12 @@ def test_an_insertion_is_re_aimed_for_the_measured_grasp_but_not_for_a_symmetric
 def test_a_belief_far_off_the_measured_grasp_is_not_followed() -> None:
     peg = _peg(4)
     hand, trace, run = _picked(peg, geometry.from_rpy(0.0, np.radians(45.0), 0.0))  # 45 deg: no symmetry
-    assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4)) is None  # type: ignore[arg-type]
+    assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4), hand.part_pose("peg")) is None  # type: ignore[arg-type]
 
 
 def test_a_grasp_within_the_searchs_reach_of_the_belief_runs_the_planned_line() -> None:
     peg = _peg(4)
     hand, trace, run = _picked(peg, geometry.from_rpy(0.0, 0.0, 0.0, (0.00015, 0.0, 0.0)))  # 0.15 mm off
-    assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4)) is None  # type: ignore[arg-type]
+    assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4), hand.part_pose("peg")) is None  # type: ignore[arg-type]
     hand, trace, run = _picked(peg, geometry.from_rpy(0.0, 0.0, 0.0, (0.0003, 0.0, 0.0)))  # 0.3 mm off
-    assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4)) is not None  # type: ignore[arg-type]
+    assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4), hand.part_pose("peg")) is not None  # type: ignore[arg-type]

@@ -37,7 +37,7 @@ def test_a_detection_that_lists_rivals_is_ambiguous_else_not_found() -> None:
 def test_a_part_not_found_fails_the_run_with_its_detections_cause(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    def not_found(detector, corrector, cloud, part, table, viewpoint=None, provisional=False) -> Detection:
+    def not_found(detector, corrector, cloud, part, table, **kwargs: object) -> Detection:
         # the reason says neither word: the cause comes from the detection's details alone
         return Detection(part=part.name, found=False, reason="nothing verified", details={"ambiguous": [{}]})
 
