@@ -21,11 +21,12 @@ import numpy as np
 import trimesh
 from pydantic import Field
 from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 
 import asmteach.core  # noqa: F401  (loads libusb before open3d)
 from asmteach.core import geometry
 from asmteach.core.models import StrictModel
-from asmteach.core.perception.registration import RefineSettings, icp_refine, model_cloud
+from asmteach.core.perception.registration import ModelCloud, RefineSettings, icp_refine, model_cloud
 
 __all__ = ["HeldPose", "InHandSettings", "measure_held_pose"]
 
@@ -50,6 +51,19 @@ class HeldPose:
     fitness: float
     rmse_mm: float
     why: str | None = None
+    information: np.ndarray | None = None
+    """``(6, 6)`` information of the registration about a small world-frame motion ``(rotation (rad), shift
+    (m))`` about the world origin: a difference ``d`` from another pose is evidence of ``d' I d`` (chi-square,
+    6 degrees of freedom at most; turns the view cannot see, e.g. about an axis of revolution, add nothing)."""
+
+    def chi2(self, T_world_other: np.ndarray) -> float:
+        """How strongly the measurement says the part is not at ``T_world_other``: ``d' I d`` of the small
+        motion ``d`` from the measured pose to it (infinite when nothing was measured)."""
+        if self.T_world_part is None or self.information is None:
+            return float("inf")
+        D = np.asarray(T_world_other, dtype=float) @ geometry.invert(self.T_world_part)
+        d = np.concatenate([Rotation.from_matrix(D[:3, :3]).as_rotvec(), D[:3, 3]])
+        return float(d @ self.information @ d)
 
     def short(self) -> dict[str, float | int | str | None]:
         """The figures a report shows."""
@@ -104,4 +118,16 @@ def measure_held_pose(
     if fitness < s.min_fitness or rmse > s.max_rmse:
         why = f"the fit is poor: {100 * fitness:.0f}% of {len(pts)} points on the surface, RMSE {1000 * rmse:.2f} mm"
         return HeldPose(None, len(pts), fitness, 1000.0 * rmse, why)
-    return HeldPose(T, len(pts), fitness, 1000.0 * rmse)
+    return HeldPose(T, len(pts), fitness, 1000.0 * rmse, information=_information(pts[inl], model, T, rmse))
+
+
+def _information(pts: np.ndarray, model: ModelCloud, T: np.ndarray, sigma: float, voxel: float = 0.003) -> np.ndarray:
+    """Point-to-plane information ``J' J / sigma^2`` of the inliers ``pts`` (world) at ``T``, one point per
+    ``voxel`` (metres): neighbouring depth pixels share their error, so counting each would overstate it."""
+    keys = np.floor(pts / voxel).astype(np.int64)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    p = pts[np.sort(first)]
+    _, idx = cKDTree(model.points).query(geometry.transform_points(geometry.invert(T), p))
+    n = model.normals[idx] @ T[:3, :3].T
+    J = np.hstack([np.cross(p, n), n])
+    return J.T @ J / max(sigma, 1e-4) ** 2

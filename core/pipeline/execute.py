@@ -7,6 +7,7 @@ animation (execution.gif) written.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -17,7 +18,7 @@ from asmteach.core.arm.insertion import guarded_insert, realigned_line_end
 from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import Robot
 from asmteach.core.models import Plan, RunReport, Trajectory
-from asmteach.core.perception.in_hand import measure_held_pose
+from asmteach.core.perception.in_hand import HeldPose, measure_held_pose
 from asmteach.core.pipeline.causes import jam_note
 from asmteach.core.pipeline.detect import sense_views
 from asmteach.core.pipeline.measure import revolution_axis, untwisted
@@ -26,6 +27,7 @@ from asmteach.core.pipeline.stage import Run, StageFailed
 from asmteach.core.pose_error import nearest_symmetric
 
 __all__ = [
+    "REALIGN_CHI2",
     "REALIGN_LIMIT_DEG",
     "REALIGN_LIMIT_MM",
     "REALIGN_MIN_DEG",
@@ -42,6 +44,12 @@ REALIGN_MIN_DEG = 0.2
 """A part measured in the hand closer than both of these (mm, deg) to the plan's belief runs the planned line:
 re-aiming costs a move and an IK per waypoint of the retreat (demo seed 3: +0.4 s of the execute stage's
 computer time for 0.15 mm / 0.08 deg), and such an offset is within the guarded search's reach."""
+
+REALIGN_CHI2 = 22.5
+"""A measured pose in the hand re-aims the insertion only when it says, beyond its own noise, that the part is
+not where the plan believes: chi-square of the difference under the registration's information above this
+(6 degrees of freedom at 99.9 %). The cameras' look is ~1 deg uncertain on a round peg; re-aiming by that
+noise tilted demo seed 1's peg 1.9 deg off a grasp that was 0.16 deg off."""
 
 REALIGN_LIMIT_MM = 10.0
 REALIGN_LIMIT_DEG = 30.0
@@ -121,7 +129,7 @@ def _jig(run: Run, plan: Plan, d: dict) -> str | None:
     return task.part_a.name if decision.hold else None
 
 
-def _measure_in_hand(run: Run, robot: Robot, arm: str, part: str, trace: ExecutionTrace) -> np.ndarray | None:
+def _measure_in_hand(run: Run, robot: Robot, arm: str, part: str, trace: ExecutionTrace) -> HeldPose | None:
     """``T_world_part`` of the part ``arm`` holds as the depth cameras see it now
     (:func:`~asmteach.core.perception.in_hand.measure_held_pose`, from where the plan believes it is), or None:
     no belief, no model of the part, no camera, or a measurement that is not sure. What was measured, or why
@@ -146,17 +154,27 @@ def _measure_in_hand(run: Run, robot: Robot, arm: str, part: str, trace: Executi
     got = measure_held_pose(
         [v.cloud for v in views], held.part.mesh, T_guess, others=others, table_height=run.cfg.table.height
     )
-    trace.events.append({"label": "measure in hand", "part": part, "t_s": round(trace.t_s, 3), **got.short()})
-    return got.T_world_part
+    ev = {"label": "measure in hand", "part": part, "t_s": round(trace.t_s, 3), **got.short()}
+    ev["chi2_vs_belief"] = round(got.chi2(T_guess), 2) if got.T_world_part is not None else None
+    trace.events.append(ev)
+    return got if got.T_world_part is not None else None
 
 
 def _line_end(
-    run: Run, robot: Robot, arm: str, part: str, trace: ExecutionTrace, T_end: np.ndarray, T_world_held: np.ndarray
+    run: Run,
+    robot: Robot,
+    arm: str,
+    part: str,
+    trace: ExecutionTrace,
+    T_end: np.ndarray,
+    T_world_held: np.ndarray,
+    chi2: Callable[[np.ndarray], float] | None = None,
 ) -> Any:
     """The insertion's end TCP re-aimed for ``part`` as it was measured in the hand (``T_world_held``) against
     where the plan believes it held (:func:`~asmteach.core.arm.insertion.realigned_line_end`), or None: no
     belief, no model of the part to tell its symmetries, or a difference beyond :data:`REALIGN_LIMIT_MM` /
-    :data:`REALIGN_LIMIT_DEG`."""
+    :data:`REALIGN_LIMIT_DEG`, or one the measurement does not tell from its noise (``chi2`` of the believed
+    world pose under :data:`REALIGN_CHI2`)."""
     planned = trace.believed_in_hand.get(part)
     if planned is None:
         return None
@@ -175,6 +193,8 @@ def _line_end(
     off_deg = float(np.degrees(geometry.rotation_distance(near, T_held)))
     if off_mm > REALIGN_LIMIT_MM or off_deg > REALIGN_LIMIT_DEG:
         return None
+    if chi2 is not None and chi2(robot.fk(arm, robot.current(arm)) @ near) < REALIGN_CHI2:
+        return None  # the look does not tell the belief from its own noise
     if off_mm < REALIGN_MIN_MM and off_deg < REALIGN_MIN_DEG:
         return None  # within what the guarded search absorbs: the planned line, no extra move or retreat IK
     return realigned_line_end(T_end, near, T_held)
@@ -217,7 +237,9 @@ def _insert(run: Run, robot: Robot, seg: Any, trace: ExecutionTrace, aim: dict[s
     q = np.asarray(seg.trajectory.positions)
     T_end = robot.fk(arm, q[-1])
     measured = _measure_in_hand(run, robot, arm, part, trace)
-    line_end = None if measured is None else _line_end(run, robot, arm, part, trace, T_end, measured)
+    line_end = None
+    if measured is not None and measured.T_world_part is not None:
+        line_end = _line_end(run, robot, arm, part, trace, T_end, measured.T_world_part, measured.chi2)
     outcome = guarded_insert(robot, seg.trajectory, part, other, line_end=line_end)
     if line_end is not None and (outcome.realigned_mm > 0.0 or outcome.realigned_deg > 0.0):
         aim[arm] = line_end @ geometry.invert(T_end)

@@ -61,3 +61,13 @@ def test_points_of_another_shape_are_a_poor_fit_not_a_pose() -> None:
     got = measure_held_pose([_seen(sphere, T, np.array([0.4, -0.6, 0.9]), 4000, 0.0005, 1)], mesh, T)
     assert got.T_world_part is None
     assert got.why is not None and "poor" in got.why
+
+
+def test_the_measurement_tells_a_belief_10_deg_off_from_its_own_noise() -> None:
+    mesh = _l_block()
+    T_true = geometry.from_rpy(0.3, -0.2, 0.5, (0.4, 0.1, 0.25))
+    clouds = [_seen(mesh, T_true, np.array([0.4, -0.6, 0.9]), 6000, 0.0015, 4)]
+    got = measure_held_pose(clouds, mesh, T_true @ geometry.from_rpy(0.0, np.radians(3.0), 0.0))
+    assert got.T_world_part is not None, got.why
+    assert got.chi2(T_true) < 22.5  # the truth is within the measurement's noise
+    assert got.chi2(T_true @ geometry.from_rpy(np.radians(10.0), 0.0, 0.0)) > 100.0

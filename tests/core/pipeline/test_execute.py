@@ -103,3 +103,11 @@ def test_a_grasp_within_the_searchs_reach_of_the_belief_runs_the_planned_line() 
     assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4), hand.part_pose("peg")) is None  # type: ignore[arg-type]
     hand, trace, run = _picked(peg, geometry.from_rpy(0.0, 0.0, 0.0, (0.0003, 0.0, 0.0)))  # 0.3 mm off
     assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4), hand.part_pose("peg")) is not None  # type: ignore[arg-type]
+
+
+def test_an_offset_the_look_cannot_tell_from_its_noise_runs_the_planned_line() -> None:
+    peg = _peg(4)
+    hand, trace, run = _picked(peg, geometry.from_rpy(0.0, 0.0, 0.0, (0.001, 0.0, 0.0)))  # 1 mm off
+    measured = hand.part_pose("peg")
+    assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4), measured, lambda T: 5.0) is None  # type: ignore[arg-type]
+    assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4), measured, lambda T: 500.0) is not None  # type: ignore[arg-type]
