@@ -154,3 +154,38 @@ def test_cloud_of_only_the_part_cannot_fit_a_table(l_block, scene) -> None:
     cloud = scene.visible_cloud(l_block.mesh, T_true, CAMERA, seed=2)
     with pytest.raises(UserError, match="no table plane"):
         StablePlacementCorrector({"table": "fit"}).correct(T_true, l_block, TablePlane(height=H), cloud)
+
+
+def _headed_pin():
+    """A pin with a 29.7 mm square head 15.8 mm long and an 11.3 mm shank 31.3 mm long (a generated side_pin's
+    B): on its head's edge and its shank's tip it rests with d / h = 0.049, under the 0.1 of a placement."""
+    import trimesh
+
+    from asmteach.core.interfaces import PartModel
+    from asmteach.core.models import PartSpec
+
+    head = trimesh.creation.box(extents=[0.0297, 0.0297, 0.0158])
+    head.apply_translation([0.0, 0.0, 0.0079])
+    shank = trimesh.creation.cylinder(radius=0.00565, height=0.0313, sections=48)
+    shank.apply_translation([0.0, 0.0, 0.0158 + 0.01565])
+    mesh = trimesh.boolean.union([head, shank], engine="manifold")
+    return PartModel(PartSpec(name="headed_pin", mesh="pin.stl"), mesh, 0.02, np.asarray(mesh.center_mass))
+
+
+def test_a_rough_pose_at_a_marginal_rest_is_snapped_there_not_to_a_robust_placement_16_deg_away() -> None:
+    from asmteach.core.rests.placements import placement_result
+
+    part = _headed_pin()
+    loose = placement_result(part, min_margin=0.01, angle_tol_deg=1.0)
+    rest = next(p for p in loose.placements if 0.01 < p.margin < 0.1)  # the tilted rest
+    T_true = geometry.rot_z(0.4) @ rest.T_table_part
+    T_true[:3, 3] += [0.4, 0.1, H]
+    T_rough = T_true @ geometry.from_rpy(np.radians(2.0), np.radians(-2.0), 0.0)  # 3 deg off, as detected
+    c = StablePlacementCorrector().correct(T_rough, part, TablePlane(height=H))
+    assert c.details["marginal_rest"] is True
+    # roll and pitch are the rest's; the yaw is kept from the rough pose (no cloud to refine it here)
+    assert np.allclose(c.T_world_part[:3, :3].T @ UP, T_true[:3, :3].T @ UP, atol=1e-9)
+    assert np.degrees(geometry.rotation_distance(c.T_world_part, T_true)) < 3.0
+    # without the fallback the nearest placement with d / h >= 0.1 is 16 deg away
+    far = StablePlacementCorrector({"max_snap_deg": 90.0}).correct(T_rough, part, TablePlane(height=H))
+    assert np.degrees(geometry.rotation_distance(far.T_world_part, T_true)) > 10.0
