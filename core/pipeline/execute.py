@@ -39,17 +39,19 @@ __all__ = [
 _REAIM_STEP_RAD = 0.2
 """A re-aimed waypoint whose IK lands this far (radians, any joint) from the one before took another branch."""
 
-REALIGN_MIN_MM = 0.2
-REALIGN_MIN_DEG = 0.2
-"""A part measured in the hand closer than both of these (mm, deg) to the plan's belief runs the planned line:
-re-aiming costs a move and an IK per waypoint of the retreat (demo seed 3: +0.4 s of the execute stage's
-computer time for 0.15 mm / 0.08 deg), and such an offset is within the guarded search's reach."""
+REALIGN_MIN_MM = 2.5
+REALIGN_MIN_DEG = 5.0
+"""A part measured in the hand closer than both of these (mm, deg) to the plan's belief runs the planned line,
+guarded: the sideways search reaches 2.5 mm (:mod:`~asmteach.core.arm.insertion_search`), and the cameras'
+look at a held part is itself 1-3 deg uncertain at ~1 m (Kinect noise on a round peg), so re-aiming by less
+adds its noise: on demo seeds 1-10 a re-aim by 1.9-2.7 deg of noise (the grasp was 0.2 deg off) left seed 1's
+peg 2.1 deg off and jammed seed 8. A re-aim also costs a move and an IK per waypoint of the retreat."""
 
 REALIGN_CHI2 = 22.5
-"""A measured pose in the hand re-aims the insertion only when it says, beyond its own noise, that the part is
-not where the plan believes: chi-square of the difference under the registration's information above this
-(6 degrees of freedom at 99.9 %). The cameras' look is ~1 deg uncertain on a round peg; re-aiming by that
-noise tilted demo seed 1's peg 1.9 deg off a grasp that was 0.16 deg off."""
+"""And only when the look says, beyond its own noise, that the part is not where the plan believes:
+chi-square of the difference under the registration's information at least this (6 degrees of freedom at
+99.9 %). The information counts one point per 3 mm voxel; it is still optimistic (demo seed 8: chi2 66 for
+a 2.7 deg difference that was noise), hence the size thresholds above as well."""
 
 REALIGN_LIMIT_MM = 10.0
 REALIGN_LIMIT_DEG = 30.0
