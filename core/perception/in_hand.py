@@ -26,7 +26,7 @@ from scipy.spatial.transform import Rotation
 import asmteach.core  # noqa: F401  (loads libusb before open3d)
 from asmteach.core import geometry
 from asmteach.core.models import StrictModel
-from asmteach.core.perception.registration import ModelCloud, RefineSettings, icp_refine, model_cloud
+from asmteach.core.perception.registration import RefineSettings, icp_refine, model_cloud
 
 __all__ = ["HeldPose", "InHandSettings", "measure_held_pose"]
 
@@ -111,23 +111,25 @@ def measure_held_pose(
     refine = RefineSettings(icp_coarse_distance=s.crop, icp_fine_distance=s.inlier)
     T = icp_refine(pts, model, T_guess, refine)
     local = geometry.transform_points(geometry.invert(T), pts)
-    d, _ = cKDTree(model.points).query(local)
+    d, nearest = cKDTree(model.points).query(local)
     inl = d <= s.inlier
     fitness = float(inl.mean())
     rmse = float(np.sqrt(np.mean(d[inl] ** 2))) if inl.any() else float("inf")
     if fitness < s.min_fitness or rmse > s.max_rmse:
         why = f"the fit is poor: {100 * fitness:.0f}% of {len(pts)} points on the surface, RMSE {1000 * rmse:.2f} mm"
         return HeldPose(None, len(pts), fitness, 1000.0 * rmse, why)
-    return HeldPose(T, len(pts), fitness, 1000.0 * rmse, information=_information(pts[inl], model, T, rmse))
+    info = _information(pts[inl], model.normals[nearest[inl]], T, rmse)
+    return HeldPose(T, len(pts), fitness, 1000.0 * rmse, information=info)
 
 
-def _information(pts: np.ndarray, model: ModelCloud, T: np.ndarray, sigma: float, voxel: float = 0.003) -> np.ndarray:
-    """Point-to-plane information ``J' J / sigma^2`` of the inliers ``pts`` (world) at ``T``, one point per
-    ``voxel`` (metres): neighbouring depth pixels share their error, so counting each would overstate it."""
+def _information(pts: np.ndarray, normals: np.ndarray, T: np.ndarray, sigma: float, voxel: float = 0.003) -> np.ndarray:
+    """Point-to-plane information ``J' J / sigma^2`` of the inliers ``pts`` (world) at ``T``, with the part-frame
+    ``normals`` of the model samples nearest them, one point per ``voxel`` (metres): neighbouring depth pixels
+    share their error, so counting each would overstate it."""
     keys = np.floor(pts / voxel).astype(np.int64)
     _, first = np.unique(keys, axis=0, return_index=True)
-    p = pts[np.sort(first)]
-    _, idx = cKDTree(model.points).query(geometry.transform_points(geometry.invert(T), p))
-    n = model.normals[idx] @ T[:3, :3].T
+    keep = np.sort(first)
+    p = pts[keep]
+    n = normals[keep] @ T[:3, :3].T
     J = np.hstack([np.cross(p, n), n])
     return J.T @ J / max(sigma, 1e-4) ** 2

@@ -56,7 +56,7 @@ import asmteach.core  # noqa: F401  (loads libusb before open3d)
 from asmteach.core import geometry
 from asmteach.core.models import StrictModel, TablePlane
 from asmteach.core.perception.open3d_tools import one_thread, to_o3d
-from asmteach.core.perception.surface_check import ray_depths, surface_check
+from asmteach.core.perception.surface_check import SurfaceCheck, ray_depths, surface_check
 
 import open3d as o3d  # isort: skip
 
@@ -64,6 +64,7 @@ __all__ = [
     "ModelCloud",
     "RefineSettings",
     "Verdict",
+    "check_surface",
     "icp_refine",
     "model_cloud",
     "noise_scale",
@@ -267,7 +268,20 @@ def verify(
         # Rejected already: the surface check (the costliest, ~60 % of a verification) would change neither
         # the verdict, nor its score, nor the reason; its shares stay NaN.
         return Verdict(T_world_part, fitness, rmse, violation, gap, False, why)
-    surf = surface_check(
+    surf = check_surface(T_part_world, context, viewpoint, model, s)
+    if surf.contradicted > s.max_contradicted:
+        why = f"the camera saw through {100 * surf.contradicted:.0f}% of the model surface it should see"
+    elif surf.coverage < s.min_coverage:
+        why = f"the seen depth explains {100 * surf.coverage:.0f}% of the model surface it should see"
+    return Verdict(T_world_part, fitness, rmse, violation, gap, why is None, why, surf.coverage, surf.contradicted)
+
+
+def check_surface(
+    T_part_world: np.ndarray, context: np.ndarray, viewpoint: np.ndarray, model: ModelCloud, s: RefineSettings
+) -> SurfaceCheck:
+    """:func:`surface_check` of the model at ``T_part_world`` (the world-to-part transform) against the seen
+    ``context`` (world) from ``viewpoint``, with the thresholds of ``s``."""
+    return surface_check(
         T_part_world,
         context,
         viewpoint,
@@ -277,11 +291,6 @@ def verify(
         ray_radius=s.ray_radius,
         max_incidence_deg=s.max_incidence_deg,
     )
-    if surf.contradicted > s.max_contradicted:
-        why = f"the camera saw through {100 * surf.contradicted:.0f}% of the model surface it should see"
-    elif surf.coverage < s.min_coverage:
-        why = f"the seen depth explains {100 * surf.coverage:.0f}% of the model surface it should see"
-    return Verdict(T_world_part, fitness, rmse, violation, gap, why is None, why, surf.coverage, surf.contradicted)
 
 
 def noise_scale(points: np.ndarray, viewpoint: np.ndarray, reference_range: float) -> np.ndarray:

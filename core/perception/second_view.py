@@ -137,16 +137,6 @@ def _near_rays(view: DepthView, centers: np.ndarray, radius: float) -> tuple[np.
     return d / rng[:, None], rng
 
 
-def _part_scene(mesh: trimesh.Trimesh) -> o3d.t.geometry.RaycastingScene:
-    """Ray-casting scene of ``mesh`` in the part frame: each pose moves the rays, not the mesh."""
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(
-        o3d.core.Tensor(np.asarray(mesh.vertices, dtype=np.float32)),
-        o3d.core.Tensor(np.asarray(mesh.faces, dtype=np.uint32)),
-    )
-    return scene
-
-
 def _predicted_ranges(
     scene: o3d.t.geometry.RaycastingScene, T_world_part: np.ndarray, eye: np.ndarray, u: np.ndarray, table: TablePlane
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -164,7 +154,7 @@ def _predicted_ranges(
 
 
 def ray_costs(
-    mesh: trimesh.Trimesh,
+    model: ModelCloud,
     poses: list[np.ndarray],
     view: DepthView,
     table: TablePlane,
@@ -172,25 +162,23 @@ def ray_costs(
     settings: SecondViewSettings | None = None,
     around: list[np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(costs (k, m), on_part (k, m))`` of the ``k`` poses on the ``m`` rays of ``view`` near any of them
-    (or near any pose of ``around``, so that poses scored in several calls share the rays).
+    """``(costs (k, m), on_part (k, m))`` of the part (``model``: its ray-casting scene and bounding sphere,
+    :func:`~asmteach.core.perception.registration.model_cloud`) at ``k`` poses on the ``m`` rays of ``view`` near
+    any of them (or near any pose of ``around``, so that poses scored in several calls share the rays).
 
     A ray's cost is its squared residual (measured minus predicted range) in sigmas, clipped at
     ``clip_sigmas``; ``on_part`` says the pose puts the part (not the table) first on that ray.
     """
     s = settings or SecondViewSettings()
     sensor = sensor or KinectSettings()
-    center = np.asarray(mesh.bounds, float).mean(axis=0)
-    radius = float(np.max(np.linalg.norm(np.asarray(mesh.vertices, float) - center, axis=1))) + s.margin
-    centers = np.array([geometry.transform_points(T, center[None])[0] for T in (around or poses)])
-    u, measured = _near_rays(view, centers, radius)
+    centers = np.array([geometry.transform_points(T, model.center[None])[0] for T in (around or poses)])
+    u, measured = _near_rays(view, centers, model.radius + s.margin)
     eye = np.asarray(view.viewpoint, float)
     sigma = _sigma(measured, sensor, s.pose_sigma)
     costs = np.empty((len(poses), len(u)))
     on_part = np.empty((len(poses), len(u)), dtype=bool)
-    scene = _part_scene(mesh)
     for i, T in enumerate(poses):
-        pred, on_part[i] = _predicted_ranges(scene, np.asarray(T, float), eye, u, table)
+        pred, on_part[i] = _predicted_ranges(model.scene, np.asarray(T, float), eye, u, table)
         r = np.where(np.isfinite(pred), (measured - pred) / sigma, np.inf)
         costs[i] = np.minimum(r * r, s.clip_sigmas**2)
     return costs, on_part
@@ -297,21 +285,20 @@ def judge_rivals(
         cands += screw_turns(cands[0], np.asarray(T, float), s.step_deg)
     for T in poses[: s.turned_rivals]:
         cands += axis_turns(mesh, np.asarray(T, float), s.step_deg)
-    center = np.asarray(mesh.bounds, float).mean(axis=0)
-    radius = float(np.max(np.linalg.norm(np.asarray(mesh.vertices, float) - center, axis=1))) + s.margin
-    centers = np.array([geometry.transform_points(T, center[None])[0] for T in cands])
+    model = model_cloud(mesh, 4000)
+    centers = np.array([geometry.transform_points(T, model.center[None])[0] for T in cands])
+    radius = model.radius + s.margin
     # every step below needs only the points around the part: crop each view once (a frame holds 300 000)
     usable = [DepthView(np.asarray(v.cloud, float)[_in_cone(v, centers, radius)], v.viewpoint) for v in usable]
-    raw, _ = _all_costs(mesh, cands, usable, table, sensor, s, cands)
+    raw, _ = _all_costs(model, cands, usable, table, sensor, s, cands)
     raw_total = raw.sum(axis=1)
     # The grid only finds the basins: the poses compared are the rivals and the cheapest candidates, each
     # refined on every view, so that a neighbour a grid step away is not taken for a rival.
     seeds = list(range(len(poses))) + [int(i) for i in np.argsort(raw_total)[: s.refine_top] if i >= len(poses)]
-    model = model_cloud(mesh, 4000)
     # the rivals as listed stay in the pool: when every refined pose falls on one, the listed rivals still
     # have to lose by the margin (the comparison is never empty)
     pool = [_fused_refine(model, cands[i], usable, table) for i in seeds] + cands[: len(poses)]
-    costs, on_part = _all_costs(mesh, pool, usable, table, sensor, s, cands)
+    costs, on_part = _all_costs(model, pool, usable, table, sensor, s, cands)
     best = int(np.argmin(costs.sum(axis=1)))
     cands = pool
     total = costs.sum(axis=1)
@@ -361,7 +348,7 @@ def _apart(A: np.ndarray, B: np.ndarray, syms: np.ndarray) -> tuple[float, float
 
 
 def _all_costs(
-    mesh: trimesh.Trimesh,
+    model: ModelCloud,
     poses: list[np.ndarray],
     views: list[DepthView],
     table: TablePlane,
@@ -370,5 +357,5 @@ def _all_costs(
     around: list[np.ndarray],
 ) -> tuple[np.ndarray, np.ndarray]:
     """Ray costs and on-part flags of ``poses`` over every view's rays near the ``around`` poses, side by side."""
-    parts = [ray_costs(mesh, poses, v, table, sensor, s, around) for v in views]
+    parts = [ray_costs(model, poses, v, table, sensor, s, around) for v in views]
     return np.hstack([c for c, _ in parts]), np.hstack([o for _, o in parts])

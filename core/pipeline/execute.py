@@ -131,23 +131,32 @@ def _jig(run: Run, plan: Plan, d: dict) -> str | None:
     return task.part_a.name if decision.hold else None
 
 
-def _measure_in_hand(run: Run, robot: Robot, arm: str, part: str, trace: ExecutionTrace) -> HeldPose | None:
-    """``T_world_part`` of the part ``arm`` holds as the depth cameras see it now
-    (:func:`~asmteach.core.perception.in_hand.measure_held_pose`, from where the plan believes it is), or None:
-    no belief, no model of the part, no camera, or a measurement that is not sure. What was measured, or why
-    not, is an event of the trace (``"measure in hand"``). No simulator truth is read: a real cell can do the same."""
+def _held_belief(robot: Robot, arm: str, part: str, trace: ExecutionTrace) -> tuple[np.ndarray, Any] | None:
+    """``(T_tcp_part as the plan believes it held, the attachment)`` of ``part`` in ``arm``, or None: no belief,
+    or no model of the held part (a robot that keeps no planning scene, or ``arm`` holds another part)."""
     planned = trace.believed_in_hand.get(part)
     if planned is None:
         return None
     try:
         held = robot.scene.attached.get(arm)
-        obstacles = robot.scene.obstacles
     except NotImplementedError:  # a robot that keeps no planning scene: no model of the held part
         return None
     if held is None or held.part.name != part:
         return None
+    return planned, held
+
+
+def _measure_in_hand(run: Run, robot: Robot, arm: str, part: str, trace: ExecutionTrace) -> HeldPose | None:
+    """The pose of the part ``arm`` holds as the depth cameras see it now
+    (:func:`~asmteach.core.perception.in_hand.measure_held_pose`, from where the plan believes it is), or None:
+    no belief, no model of the part, no camera, or a measurement that is not sure. What was measured, or why
+    not, is an event of the trace (``"measure in hand"``). No simulator truth is read: a real cell can do the same."""
+    belief = _held_belief(robot, arm, part, trace)
+    if belief is None:
+        return None
+    planned, held = belief
     T_guess = robot.fk(arm, robot.current(arm)) @ planned
-    meshes = {ob.name: ob for ob in obstacles}
+    meshes = {ob.name: ob for ob in robot.scene.obstacles}
     others = [(meshes[n].mesh, T) for n, T in trace.believed.items() if n != part and n in meshes]
     try:
         _, views = sense_views(robot, run.execution.depth_frames)
@@ -177,16 +186,12 @@ def _line_end(
     belief, no model of the part to tell its symmetries, or a difference beyond :data:`REALIGN_LIMIT_MM` /
     :data:`REALIGN_LIMIT_DEG`, or one the measurement does not tell from its noise (``chi2`` of the believed
     world pose under :data:`REALIGN_CHI2`)."""
-    planned = trace.believed_in_hand.get(part)
-    if planned is None:
+    belief = _held_belief(robot, arm, part, trace)
+    if belief is None:
         return None
-    try:
-        held = robot.scene.attached.get(arm)
-    except NotImplementedError:  # a robot that keeps no planning scene: no model of the held part
-        return None
-    if held is None or held.part.name != part:
-        return None
-    T_held = geometry.invert(robot.fk(arm, robot.current(arm))) @ T_world_held
+    planned, held = belief
+    T_world_tcp = robot.fk(arm, robot.current(arm))
+    T_held = geometry.invert(T_world_tcp) @ T_world_held
     near = nearest_symmetric(planned, T_held, run.symmetries(held.part))  # a symmetric turn gains nothing
     axis = revolution_axis(held.part)
     if axis is not None:
@@ -195,7 +200,7 @@ def _line_end(
     off_deg = float(np.degrees(geometry.rotation_distance(near, T_held)))
     if off_mm > REALIGN_LIMIT_MM or off_deg > REALIGN_LIMIT_DEG:
         return None
-    if chi2 is not None and chi2(robot.fk(arm, robot.current(arm)) @ near) < REALIGN_CHI2:
+    if chi2 is not None and chi2(T_world_tcp @ near) < REALIGN_CHI2:
         return None  # the look does not tell the belief from its own noise
     if off_mm < REALIGN_MIN_MM and off_deg < REALIGN_MIN_DEG:
         return None  # within what the guarded search absorbs: the planned line, no extra move or retreat IK

@@ -20,10 +20,11 @@ from asmteach.core.perception.registration import (
     ModelCloud,
     RefineSettings,
     _free_space_violation,
+    check_surface,
     model_cloud,
     verify,
 )
-from asmteach.core.perception.surface_check import ray_depths, surface_check
+from asmteach.core.perception.surface_check import ray_depths
 from asmteach.core.rests.drops import drop_rests
 from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
 from asmteach.plugins.detectors.cvfh.prescore import SampleIndex, near_shares
@@ -83,16 +84,7 @@ def test_the_pruned_ray_tree_counts_what_the_full_one_does(scene_and_model, turn
     R = geometry.rot_z(np.radians(turn_deg))[:3, :3]
     T = geometry.from_rotation(R, c - R @ c) @ scene.T_world_part  # right pose, slightly and badly turned
     s = RefineSettings()
-    got = surface_check(
-        geometry.invert(T),
-        context,
-        DEFAULT_EYE,
-        model,
-        fit=s.surface_fit,
-        off=s.surface_off,
-        ray_radius=s.ray_radius,
-        max_incidence_deg=s.max_incidence_deg,
-    )
+    got = check_surface(geometry.invert(T), context, DEFAULT_EYE, model, s)
     assert got.visible > 0
     assert (got.visible, got.explained, got.seen_through, got.in_front, got.missing) == _surface_counts_unpruned(
         geometry.invert(T), context, model, s

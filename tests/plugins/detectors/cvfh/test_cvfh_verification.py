@@ -14,8 +14,7 @@ from asmteach.core.interfaces import PartModel
 from asmteach.core.models import TablePlane
 from asmteach.core.parts import PartSpec, build_part
 from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
-from asmteach.core.perception.registration import RefineSettings, icp_refine, model_cloud, verify
-from asmteach.core.perception.surface_check import surface_check
+from asmteach.core.perception.registration import RefineSettings, check_surface, icp_refine, model_cloud, verify
 from asmteach.core.rests.drops import drop_rests
 from asmteach.core.symmetry import part_symmetries
 from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
@@ -72,26 +71,8 @@ def test_a_pose_20mm_70deg_off_is_rejected_and_the_true_one_accepted(keyed_peg: 
     v = verify(T_off, cluster, context, DEFAULT_EYE, model, s, table)
     assert not v.accepted and v.why
     # The model side: at the wrong pose the camera saw through much of the surface the model shows it.
-    check = surface_check(
-        geometry.invert(T_off),
-        context,
-        DEFAULT_EYE,
-        model,
-        fit=s.surface_fit,
-        off=s.surface_off,
-        ray_radius=s.ray_radius,
-        max_incidence_deg=s.max_incidence_deg,
-    )
-    right = surface_check(
-        geometry.invert(scene.T_world_part),
-        context,
-        DEFAULT_EYE,
-        model,
-        fit=s.surface_fit,
-        off=s.surface_off,
-        ray_radius=s.ray_radius,
-        max_incidence_deg=s.max_incidence_deg,
-    )
+    check = check_surface(geometry.invert(T_off), context, DEFAULT_EYE, model, s)
+    right = check_surface(geometry.invert(scene.T_world_part), context, DEFAULT_EYE, model, s)
     assert check.contradicted > 2 * s.max_contradicted and check.coverage < 0.5
     assert right.coverage > s.min_coverage and right.contradicted < s.max_contradicted
     # ICP from the wrong pose either finds the truth or stays a pose verification rejects.
