@@ -10,7 +10,8 @@
   planning cannot move the world.
 - :class:`World`: the cell itself, simulated or real (reset, execute a
   trajectory, grip, sense depth and RGB, the camera pose, the parts' true
-  poses). Only the pipeline holds it.
+  poses; optionally a depth camera on a hand, :class:`WristCamera`). Only the
+  pipeline holds it.
 
 The config's ``robot:`` section builds one :class:`~asmteach.core.interfaces.Robot`,
 which is a :class:`RobotModel` carrying its current :class:`PlanningScene`; a
@@ -43,8 +44,9 @@ import numpy as np
 if TYPE_CHECKING:  # interfaces imports this module; these names are only annotations here
     from asmteach.core.interfaces import IKResult, Obstacle, PartModel
     from asmteach.core.models import HandSpec, TablePlane, Trajectory
+    from asmteach.core.perception.depth_camera import KinectSettings  # loads open3d: annotations only
 
-__all__ = ["Attachment", "PlanningScene", "RobotModel", "World"]
+__all__ = ["Attachment", "PlanningScene", "RobotModel", "World", "WristCamera"]
 
 
 # ---------------------------------------------------------------- kinematics
@@ -226,6 +228,15 @@ def _frozen(a: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- world
+@dataclass(frozen=True, eq=False)  # eq=False: numpy arrays have no single truth value to compare by
+class WristCamera:
+    """A depth camera carried by an arm's hand: ``T_tcp_cam`` ``(4, 4)`` is its OpenCV frame (z forward, y down)
+    in the arm's TCP frame (metres), so ``T_world_cam = fk(arm, q) @ T_tcp_cam``; ``sensor`` is its model."""
+
+    T_tcp_cam: np.ndarray
+    sensor: KinectSettings
+
+
 class World(abc.ABC):
     """The cell the robot acts in: simulated or real. Only the pipeline holds one.
 
@@ -276,6 +287,26 @@ class World(abc.ABC):
         """How many depth cameras the world has; a world with more takes ``view=i`` in :meth:`sense_depth`
         and :meth:`camera_pose` (0 is the one above). Optional: one unless a world says otherwise."""
         return 1
+
+    def wrist_cameras(self) -> list[str]:
+        """The arms whose hand carries a depth camera (:meth:`wrist_camera`, :meth:`sense_wrist`); none by default."""
+        return []
+
+    def wrist_camera(self, arm: str) -> WristCamera:
+        """Where ``arm``'s wrist camera sits on the hand and what sensor it is.
+
+        Optional: only arms of :meth:`wrist_cameras` have one; the default raises :class:`NotImplementedError`.
+        """
+        raise NotImplementedError(f"{type(self).__name__} has no wrist camera")
+
+    def sense_wrist(self, arm: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A frame of ``arm``'s wrist camera at the arm's configuration now: ``(depth image (h, w) metres, NaN =
+        no return; cloud (n, 3) world frame of the table and the parts, not the robot (a self-filter, as
+        :meth:`sense_depth`); T_world_cam (4, 4))``.
+
+        Optional: the default raises :class:`NotImplementedError`.
+        """
+        raise NotImplementedError(f"{type(self).__name__} has no wrist camera")
 
     def sense_rgb(self) -> np.ndarray:
         """An RGB image ``(h, w, 3) uint8`` of the cell (the run's animation is made of them).
