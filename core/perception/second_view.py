@@ -33,15 +33,27 @@ from asmteach.core.pose_error import pose_error
 
 import open3d as o3d  # isort: skip  (after asmteach.core)
 
-__all__ = ["DepthView", "SecondViewSettings", "ViewJudgement", "axis_turns", "judge_rivals", "ray_costs", "screw_turns"]
+__all__ = [
+    "DepthView",
+    "SecondViewSettings",
+    "ViewJudgement",
+    "axis_turns",
+    "judge_rivals",
+    "range_sigma",
+    "ray_costs",
+    "screw_turns",
+]
 
 
 @dataclass(frozen=True)
 class DepthView:
-    """One depth view: its cloud ``(n, 3)`` and the camera centre ``(3,)`` (world frame, metres)."""
+    """One depth view: its cloud ``(n, 3)`` and the camera centre ``(3,)`` (world frame, metres), and the sensor
+    that took it (its noise model gives each ray's sigma; ``None``: the cell's Kinect, or the sensor the caller
+    passes). A wrist camera's close, low-noise view weighs each ray by its own, smaller sigma."""
 
     cloud: np.ndarray
     viewpoint: np.ndarray | None
+    sensor: KinectSettings | None = None
 
 
 class SecondViewSettings(StrictModel):
@@ -104,7 +116,7 @@ class ViewJudgement:
         }
 
 
-def _sigma(rng: np.ndarray, sensor: KinectSettings, pose_sigma: float) -> np.ndarray:
+def range_sigma(rng: np.ndarray, sensor: KinectSettings, pose_sigma: float) -> np.ndarray:
     """Per-ray std (metres) of the measured range ``rng``: axial noise, quantisation step / sqrt(12), pose."""
     var = np.full(rng.shape, pose_sigma**2)
     if sensor.axial_noise:
@@ -167,14 +179,15 @@ def ray_costs(
     any of them (or near any pose of ``around``, so that poses scored in several calls share the rays).
 
     A ray's cost is its squared residual (measured minus predicted range) in sigmas, clipped at
-    ``clip_sigmas``; ``on_part`` says the pose puts the part (not the table) first on that ray.
+    ``clip_sigmas``; ``on_part`` says the pose puts the part (not the table) first on that ray. The noise model is
+    the view's own sensor (``view.sensor``), else ``sensor``, else the cell's Kinect.
     """
     s = settings or SecondViewSettings()
-    sensor = sensor or KinectSettings()
+    sensor = view.sensor or sensor or KinectSettings()
     centers = np.array([geometry.transform_points(T, model.center[None])[0] for T in (around or poses)])
     u, measured = _near_rays(view, centers, model.radius + s.margin)
     eye = np.asarray(view.viewpoint, float)
-    sigma = _sigma(measured, sensor, s.pose_sigma)
+    sigma = range_sigma(measured, sensor, s.pose_sigma)
     costs = np.empty((len(poses), len(u)))
     on_part = np.empty((len(poses), len(u)), dtype=bool)
     for i, T in enumerate(poses):
@@ -289,7 +302,9 @@ def judge_rivals(
     centers = np.array([geometry.transform_points(T, model.center[None])[0] for T in cands])
     radius = model.radius + s.margin
     # every step below needs only the points around the part: crop each view once (a frame holds 300 000)
-    usable = [DepthView(np.asarray(v.cloud, float)[_in_cone(v, centers, radius)], v.viewpoint) for v in usable]
+    usable = [
+        DepthView(np.asarray(v.cloud, float)[_in_cone(v, centers, radius)], v.viewpoint, v.sensor) for v in usable
+    ]
     raw, _ = _all_costs(model, cands, usable, table, sensor, s, cands)
     raw_total = raw.sum(axis=1)
     # The grid only finds the basins: the poses compared are the rivals and the cheapest candidates, each

@@ -141,3 +141,20 @@ def test_a_flat_that_neither_camera_sees_stays_ambiguous(peg: PartModel) -> None
     assert not det.found
     assert det.reason.startswith("still ambiguous after 2 views: no pose is clearly preferred")
     assert det.details["second_view"]["winner"] is None and det.details["second_view"]["views"] == 2
+
+
+def test_a_view_weighs_its_rays_by_its_own_sensor(peg: PartModel) -> None:
+    """A close, low-noise camera's view: the same residuals cost more sigmas than the Kinect's would."""
+    from asmteach.core.perception.registration import model_cloud
+    from asmteach.core.perception.second_view import ray_costs
+
+    T_true = _true_pose(peg.mesh)
+    rival = _rival(peg.mesh, T_true, 20.0)
+    view = _view(peg.mesh, T_true, EYE_2, seed=2)
+    quiet = KinectSettings(axial_a=0.0002, axial_b=0.0, quantize=False)
+    model = model_cloud(peg.mesh, 4000)
+    kinect, _ = ray_costs(model, [T_true, rival], view, TablePlane())
+    own, _ = ray_costs(model, [T_true, rival], DepthView(view.cloud, view.viewpoint, quiet), TablePlane())
+    passed, _ = ray_costs(model, [T_true, rival], view, TablePlane(), sensor=quiet)
+    assert np.array_equal(own, passed)  # the view's sensor is the one a caller could pass
+    assert own[1].sum() - own[0].sum() > kinect[1].sum() - kinect[0].sum()

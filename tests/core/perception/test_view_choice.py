@@ -1,0 +1,85 @@
+"""Viewpoint choice for a close look: a D peg whose flat one view cannot see (meshes made in code)."""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+from asmteach.core import geometry
+from asmteach.core.models import TablePlane
+from asmteach.core.perception.depth_camera import KinectSettings
+from asmteach.core.perception.view_choice import ViewChoiceSettings, candidate_cameras, rank_viewpoints
+from asmteach.core.symmetry import part_symmetries
+
+CLOSE = KinectSettings(min_range=0.1, max_range=1.0, axial_a=0.0005, axial_b=0.001, axial_z0=0.1)
+"""A short-range, low-noise sensor such as a wrist camera's."""
+
+
+def _d_peg(r: float = 0.015, flat: float = 0.009, length: float = 0.06) -> trimesh.Trimesh:
+    """A round peg with a flat at x = ``flat``, axis along y (the hull of the D outline)."""
+    a = np.linspace(0.0, 2.0 * np.pi, 96, endpoint=False)
+    ring = np.c_[r * np.cos(a), r * np.sin(a)]
+    ring = ring[ring[:, 0] <= flat]
+    half = np.sqrt(r * r - flat * flat)
+    outline = np.r_[ring, [[flat, -half], [flat, half]]]
+    pts = np.r_[
+        np.c_[outline[:, 0], np.full(len(outline), -length / 2), outline[:, 1]],
+        np.c_[outline[:, 0], np.full(len(outline), length / 2), outline[:, 1]],
+    ]
+    return trimesh.convex.convex_hull(pts)
+
+
+def _poses(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
+    """Lying on its round side at (0.45, 0) with the flat facing +x, and turned 20 deg about its axis."""
+    T = np.eye(4)
+    T[:3, 3] = [0.45, 0.0, -float(mesh.bounds[0, 2])]
+    com = np.asarray(mesh.center_mass, float)
+    R = geometry.from_rotvec([0.0, np.radians(20.0), 0.0])[:3, :3]
+    return T, T @ geometry.from_rotation(R, com - R @ com)
+
+
+def test_candidates_keep_the_sensor_range() -> None:
+    surface = np.array([[0.45, 0.0, 0.0], [0.45, 0.0, 0.08]])
+    centre = surface.mean(axis=0)
+    near = KinectSettings(min_range=0.25, max_range=1.0)
+    cams = candidate_cameras(centre, surface, near, TablePlane(), ViewChoiceSettings())
+    assert cams and all(np.linalg.norm(surface - T[:3, 3], axis=1).min() >= 0.25 for T, *_ in cams)
+    assert {d for _, d, _, _ in cams} <= {0.275, 0.35}  # 0.2 m is too near for this sensor
+    for T, _, el, _ in cams:  # each looks at the centre, from el degrees above the table
+        ray = centre - T[:3, 3]
+        assert np.allclose(T[:3, 2], ray / np.linalg.norm(ray))
+        assert np.isclose(np.degrees(np.arcsin(-ray[2] / np.linalg.norm(ray))), el)
+
+
+def test_the_side_that_shows_the_flat_ranks_first() -> None:
+    mesh = _d_peg()
+    T_true, T_rival = _poses(mesh)
+    syms = part_symmetries(mesh, np.asarray(mesh.center_mass))
+    ranked = rank_viewpoints(mesh, [T_rival, T_true], CLOSE, TablePlane(), symmetries=syms)
+    assert len(ranked) == 3 * 3 * 12
+    seps = [v.separation for v in ranked]
+    assert seps == sorted(seps, reverse=True)
+    best, worst = ranked[0], ranked[-1]
+    assert best.T_world_cam[0, 3] > 0.45  # on the flat's side (+x)
+    assert worst.T_world_cam[0, 3] < 0.45
+    assert best.separation > 10.0 * worst.separation
+    assert best.as_details()["predicted_separation"] == round(best.separation, 1)
+    # a second frame doubles the evidence
+    twice = rank_viewpoints(mesh, [T_rival, T_true], CLOSE, TablePlane(), symmetries=syms, frames=2)
+    assert np.isclose(twice[0].separation, 2.0 * best.separation)
+
+
+def test_an_occluder_on_the_flat_side_hides_it() -> None:
+    mesh = _d_peg()
+    T_true, T_rival = _poses(mesh)
+    wall = trimesh.creation.box(extents=[0.01, 0.3, 0.3])
+    T_wall = geometry.from_rotation(np.eye(3), [0.49, 0.0, 0.15])
+    free = rank_viewpoints(mesh, [T_rival, T_true], CLOSE, TablePlane())
+    hidden = rank_viewpoints(mesh, [T_rival, T_true], CLOSE, TablePlane(), occluders=[(wall, T_wall)])
+    assert free[0].T_world_cam[0, 3] > 0.45 and hidden[0].T_world_cam[0, 3] < 0.5
+    assert hidden[0].separation < free[0].separation
+
+
+def test_one_pose_has_nothing_to_tell_apart() -> None:
+    mesh = _d_peg()
+    assert rank_viewpoints(mesh, [_poses(mesh)[0]], CLOSE, TablePlane()) == []
