@@ -1,0 +1,196 @@
+"""A closer look by a wrist camera settles a D peg that the fixed Kinect cannot: a small fake world (a flying
+camera arm whose joints are the TCP's position and rotation vector) rendered with the depth camera model."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from asmteach.core import geometry
+from asmteach.core.interfaces import MotionResult, PartModel
+from asmteach.core.interfaces.robot import IKResult
+from asmteach.core.models import Detection, PartSpec, TablePlane, Trajectory
+from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings, look_at
+from asmteach.core.perception.second_view import DepthView
+from asmteach.core.pipeline.active_look import look_closer, seen_heightmap
+from asmteach.core.pose_error import pose_error
+from asmteach.core.robot import PlanningScene, WristCamera
+from asmteach.core.symmetry import part_symmetries
+
+EYE = np.array([-0.05, 0.0, 0.70])  # the fixed Kinect, on the robot's side of the table
+TARGET = np.array([0.45, 0.0, 0.0])
+TABLE = trimesh.creation.box(extents=[0.8, 1.2, 0.02])
+T_TABLE = geometry.from_rotation(np.eye(3), [0.45, 0.0, -0.01])
+
+
+def _d_peg(r: float = 0.015, flat: float = 0.009, length: float = 0.06) -> trimesh.Trimesh:
+    a = np.linspace(0.0, 2.0 * np.pi, 96, endpoint=False)
+    ring = np.c_[r * np.cos(a), r * np.sin(a)]
+    ring = ring[ring[:, 0] <= flat]
+    half = np.sqrt(r * r - flat * flat)
+    outline = np.r_[ring, [[flat, -half], [flat, half]]]
+    pts = np.r_[
+        np.c_[outline[:, 0], np.full(len(outline), -length / 2), outline[:, 1]],
+        np.c_[outline[:, 0], np.full(len(outline), length / 2), outline[:, 1]],
+    ]
+    return trimesh.convex.convex_hull(pts)
+
+
+def _q(T: np.ndarray) -> np.ndarray:
+    return np.r_[T[:3, 3], Rotation.from_matrix(T[:3, :3]).as_rotvec()]
+
+
+def _T(q: np.ndarray) -> np.ndarray:
+    return geometry.from_rotation(Rotation.from_rotvec(q[3:]).as_matrix(), q[:3])
+
+
+class _Scene(PlanningScene):
+    """The TCP collides below ``floor`` metres (the table and what stands on it, crudely)."""
+
+    floor = 0.05
+
+    def in_collision(self, arm: str, qs: np.ndarray, *, ignore: tuple = ()) -> np.ndarray:
+        return np.atleast_2d(qs)[:, 2] < self.floor
+
+    def clearance(self, arm: str, qs: np.ndarray, upto: float = np.inf) -> np.ndarray:
+        return np.minimum(np.atleast_2d(qs)[:, 2] - self.floor, upto)
+
+
+class _FlyingCamera:
+    """One arm, ``"main"``, with a wrist camera 5 cm along the TCP's y; the D peg lies at ``T_part``."""
+
+    arms = ("main",)
+
+    def __init__(self, mesh: trimesh.Trimesh, T_part: np.ndarray) -> None:
+        self.mesh, self.T_part = mesh, T_part
+        self.q = _q(look_at([0.3, 0.0, 0.5], TARGET))
+        self.scene = _Scene({"main": self.q})
+        self.cam = WristCamera(
+            T_tcp_cam=geometry.from_rotation(np.eye(3), [0.0, 0.05, 0.0]), sensor=KinectSettings.wrist_stereo()
+        )
+        self.renderer = DepthCamera(self.cam.sensor, seed=5)
+        self.executed: list[Trajectory] = []
+
+    def wrist_cameras(self) -> list[str]:
+        return ["main"]
+
+    def wrist_camera(self, arm: str) -> WristCamera:
+        return self.cam
+
+    def current(self, arm: str) -> np.ndarray:
+        return self.q.copy()
+
+    def joint_names(self, arm: str) -> list[str]:
+        return ["x", "y", "z", "rx", "ry", "rz"]
+
+    def joint_limits(self, arm: str) -> tuple[np.ndarray, np.ndarray]:
+        return np.full(6, -10.0), np.full(6, 10.0)
+
+    def speed_limits(self, arm: str) -> np.ndarray:
+        return np.ones(6)
+
+    def acceleration_limits(self, arm: str) -> None:
+        return None
+
+    def ik_many(self, arm: str, T: np.ndarray, q_seed: np.ndarray | None = None) -> list[IKResult]:
+        return [IKResult(True, _q(t), 0.0, 0.0) for t in np.asarray(T).reshape(-1, 4, 4)]
+
+    def execute(self, traj: Trajectory) -> None:
+        assert np.allclose(traj.positions[0], self.q, atol=1e-6), "a trajectory must start where the arm is"
+        self.executed.append(traj)
+        self.q = np.asarray(traj.positions[-1], float)
+
+    def sense_wrist(self, arm: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        T_world_cam = _T(self.q) @ self.cam.T_tcp_cam
+        frame = self.renderer.render([(TABLE, T_TABLE), (self.mesh, self.T_part)], T_world_cam)
+        return frame.depth, frame.points_world, T_world_cam
+
+
+class _Straight:
+    """A motion planner that tries the straight line only."""
+
+    def plan(self, start: np.ndarray, goal: np.ndarray, *, lower, upper, is_valid, cost=None, time_limit=5.0):
+        path = np.linspace(start, goal, 20)
+        if not np.all(is_valid.batch(path)):
+            return MotionResult(False, None, "the straight line collides")
+        return MotionResult(True, path)
+
+
+@pytest.fixture(scope="module")
+def case() -> tuple[PartModel, np.ndarray, np.ndarray, DepthView]:
+    mesh = _d_peg()
+    part = PartModel(PartSpec(name="d_peg", mesh="d_peg.stl"), mesh, 0.1, np.asarray(mesh.center_mass))
+    T_true = np.eye(4)
+    T_true[:3, 3] = [0.45, 0.0, -float(mesh.bounds[0, 2])]  # the flat faces +x: away from the Kinect
+    com = np.asarray(mesh.center_mass, float)
+    R = geometry.from_rotvec([0.0, np.radians(20.0), 0.0])[:3, :3]
+    rival = T_true @ geometry.from_rotation(R, com - R @ com)
+    frame = DepthCamera(KinectSettings(), seed=1).render([(TABLE, T_TABLE), (mesh, T_true)], look_at(EYE, TARGET))
+    return part, T_true, rival, DepthView(frame.points_world, EYE)
+
+
+def _ambiguous(part: PartModel, poses: list[np.ndarray]) -> Detection:
+    return Detection(
+        part=part.name,
+        found=False,
+        reason="ambiguous: a pose 0 mm and 20 deg away explains the view as well",
+        details={"ambiguous": [{"T_world_part": T.tolist()} for T in poses], "ambiguous_kind": "near_twin"},
+    )
+
+
+def test_a_close_look_settles_the_d_peg_and_the_arm_comes_back(case) -> None:
+    part, T_true, rival, first = case
+    robot = _FlyingCamera(part.mesh, T_true)
+    start = robot.current("main")
+    syms = part_symmetries(part.mesh, part.center_of_mass)
+    out = look_closer(
+        robot,
+        _ambiguous(part, [rival, T_true]),
+        part,
+        [first],
+        TablePlane(),
+        _Straight(),
+        looks=2,
+        frames=2,
+        symmetries=syms,
+    )
+    det = out.detection
+    assert det.found, out.looks
+    assert pose_error(det.rough, T_true, right=syms).within(2.0, 3.0)
+    look = det.details["resolved_by_look"]
+    assert look["made"] and look["winner"] == 1 and look["predicted_separation"] > 0
+    assert look["camera_xyz_mm"][0] > 450.0  # it looked from the flat's side
+    assert len(robot.executed) == 2 and np.allclose(robot.current("main"), start)
+    assert out.robot_seconds == pytest.approx(sum(t.times[-1] for t in robot.executed))
+    # what the fixed view alone says: still ambiguous (the look, not the order of the rivals, decided)
+    assert not look_closer(
+        robot, _ambiguous(part, [rival, T_true]), part, [first], TablePlane(), _Straight(), looks=0
+    ).detection.found
+
+
+def test_a_look_that_cannot_be_made_says_why(case) -> None:
+    part, T_true, rival, first = case
+    robot = _FlyingCamera(part.mesh, T_true)
+    robot.scene.floor = 10.0  # every configuration collides
+    det = _ambiguous(part, [rival, T_true])
+    out = look_closer(robot, det, part, [first], TablePlane(), _Straight(), looks=2, max_tries=3)
+    assert out.detection is det and not robot.executed and out.robot_seconds == 0.0
+    assert [rec["not_made"] for rec in out.looks[1:]] == ["all 4 IK solutions collide"] * 3
+
+
+def test_no_wrist_camera_no_look(case) -> None:
+    part, T_true, rival, first = case
+    robot = _FlyingCamera(part.mesh, T_true)
+    robot.wrist_cameras = lambda: []  # type: ignore[method-assign]
+    det = _ambiguous(part, [rival, T_true])
+    out = look_closer(robot, det, part, [first], TablePlane(), _Straight())
+    assert out.detection is det and out.looks == []
+
+
+def test_the_heightmap_fills_under_what_was_seen() -> None:
+    pts = np.array([[0.405, 0.005, 0.03], [0.407, 0.006, 0.05], [0.6, 0.2, 0.001], [0.305, 0.0, 0.04]])
+    mesh = seen_heightmap([DepthView(pts, None)], TablePlane(), skip=[(np.array([0.3, 0.0, 0.04]), 0.02)])
+    assert mesh is not None
+    assert np.allclose(mesh.bounds, [[0.40, 0.0, 0.0], [0.41, 0.01, 0.05]])  # one column to the highest point
