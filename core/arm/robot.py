@@ -32,12 +32,12 @@ from asmteach.core.arm.plan_checker import recheck_plan
 from asmteach.core.arm.scene import ArmScene, SceneBinding
 from asmteach.core.arm.settings import ArmRobotSettings
 from asmteach.core.arm.sim import PyBulletWorld
-from asmteach.core.arm.sim_camera import render_rgb
+from asmteach.core.arm.sim_camera import render_rgb, wrist_camera_of
 from asmteach.core.arm.sim_gripper import GripperJoints, grip
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import IKResult, Obstacle, PartModel, Robot
 from asmteach.core.models import HandSpec, Plan, StrictModel, TablePlane, Trajectory
-from asmteach.core.robot import World
+from asmteach.core.robot import World, WristCamera
 
 __all__ = ["ArmRobot", "ArmSpec"]
 
@@ -66,6 +66,7 @@ class ArmRobot(Robot, World):
         self._table = TablePlane(height=self.settings.table_height)
         self._world_q: dict[str, np.ndarray] = {}  # arm -> joints in the world (radians)
         self._depth_cams: list[Any] = []  # the virtual Kinects, made on the first sense_depth (open3d loads then)
+        self._wrist: dict[str, tuple[WristCamera, Any, np.random.Generator]] = {}  # arm -> camera, model, noise
 
     def _setup(
         self,
@@ -98,6 +99,9 @@ class ArmRobot(Robot, World):
             self._set_fingers(a, s.gripper.open_values)
         self._world_q = {a: s.home.copy() for a, s in arms.items()}
         self.scene = ArmScene(self._binding, self._world_q, table=self._table_obstacle(st.table_height))
+        unknown = sorted(set(st.wrist_camera.arms) - set(arms)) if st.wrist_camera is not None else []
+        if unknown:
+            raise UserError(f"robot.settings.wrist_camera.arms: no arm {unknown}; this robot has {list(arms)}")
 
     def _table_obstacle(self, height: float, thickness: float = 0.05) -> Obstacle:
         """The table as the checker models it: a ``thickness`` slab whose top face is at ``height`` (metres)."""
@@ -397,6 +401,37 @@ class ArmRobot(Robot, World):
         # the parts; the depth image keeps everything the sensor saw.
         n_world = 1 + len(self.sim.parts)
         return frame.depth, frame.points_world[frame.labels < n_world]
+
+    def wrist_cameras(self) -> list[str]:
+        """The arms of ``settings.wrist_camera.arms`` (none when it is null), in :attr:`arms` order."""
+        mount = self.settings.wrist_camera
+        return [] if mount is None else [a for a in self.arms if a in mount.arms]
+
+    def wrist_camera(self, arm: str) -> WristCamera:
+        """``arm``'s wrist camera: ``T_tcp_cam`` (TCP frame, metres) and its sensor (``settings.wrist_camera``)."""
+        return self._wrist_parts(arm)[0]
+
+    def _wrist_parts(self, arm: str) -> tuple[WristCamera, Any, np.random.Generator]:
+        if arm not in self._wrist:
+            if arm not in self.wrist_cameras():
+                raise UserError(f"arm {arm!r} has no wrist camera (the arms with one: {self.wrist_cameras()})")
+            from asmteach.core.perception.depth_camera import DepthCamera
+
+            cam = wrist_camera_of(self.settings.wrist_camera)
+            # its own noise, seeded from the run seed and the arm: the fixed cameras' frames do not change
+            rng = self.rng(2000, self.arms.index(arm))
+            self._wrist[arm] = (cam, DepthCamera(cam.sensor), rng)
+        return self._wrist[arm]
+
+    def sense_wrist(self, arm: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``arm``'s wrist camera at the arm's joints now: depth ``(h, w)`` metres (NaN = no return), the
+        world-frame cloud ``(n, 3)`` of the table and the parts (the robot self-filtered as in
+        :meth:`sense_depth`) and ``T_world_cam = fk(arm, current(arm)) @ T_tcp_cam`` ``(4, 4)``."""
+        cam, model, rng = self._wrist_parts(arm)
+        pose = self.fk(arm, self.current(arm)) @ cam.T_tcp_cam
+        frame = model.render(self._scene_meshes(), pose, rng=rng)
+        n_world = 1 + len(self.sim.parts)
+        return frame.depth, frame.points_world[frame.labels < n_world], pose
 
     def sense_rgb(self) -> np.ndarray:
         """RGB image ``(480, 640, 3) uint8`` from the same camera pose (PyBullet TinyRenderer)."""

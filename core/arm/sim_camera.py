@@ -1,4 +1,5 @@
-"""Camera images of a PyBullet world: an OpenCV-frame pinhole camera rendered with TinyRenderer.
+"""Camera images of a PyBullet world (an OpenCV-frame pinhole camera rendered with TinyRenderer) and the
+wrist camera a mount setting describes.
 
 ``T_world_cam`` is the camera pose in the world (OpenCV frame: z forward, y down, metres);
 intrinsics in pixels.
@@ -6,11 +7,38 @@ intrinsics in pixels.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pybullet
 from pybullet_utils import bullet_client
+from pydantic import ValidationError
 
-__all__ = ["render_rgb"]
+from asmteach.core import geometry
+from asmteach.core.arm.settings import WristCameraMount
+from asmteach.core.errors import UserError
+from asmteach.core.robot import WristCamera
+
+if TYPE_CHECKING:
+    from asmteach.core.perception.depth_camera import KinectSettings
+
+__all__ = ["render_rgb", "wrist_camera_of"]
+
+
+def wrist_camera_of(mount: WristCameraMount) -> WristCamera:
+    """The :class:`~asmteach.core.robot.WristCamera` a mount setting describes: ``T_tcp_cam`` ``(4, 4)`` (TCP
+    frame, metres; read-only) and the sensor preset with its overrides (:class:`UserError` on a bad override)."""
+    from asmteach.core.perception.depth_camera import KinectSettings  # open3d loads with it: only when needed
+
+    T = geometry.from_rpy(*np.radians(mount.rpy_deg), mount.xyz)
+    T.setflags(write=False)
+    preset = KinectSettings.wrist_stereo if mount.sensor == "wrist_stereo" else KinectSettings
+    try:
+        sensor: KinectSettings = preset(**mount.sensor_overrides)
+    except ValidationError as e:
+        bad = "; ".join(f"{'.'.join(str(k) for k in err['loc'])}: {err['msg']}" for err in e.errors())
+        raise UserError(f"robot.settings.wrist_camera.sensor_overrides: {bad}") from None
+    return WristCamera(T_tcp_cam=T, sensor=sensor)
 
 
 def render_rgb(

@@ -22,6 +22,12 @@ gripper (see :mod:`asmteach.plugins.robots.nextage.hand`). Home is, by
 default, a *ready* pose with the hands 0.15 m above the table, pointing down,
 behind the workspace as the camera sees it; the upstream init pose
 ("goInitial") leaves the fingertips 3 cm above the table top, where parts lie.
+
+Wrist cameras: the real NEXTAGE OPEN carries an RGB camera on each hand; we model
+a short-range depth camera there instead (:data:`WRIST_CAMERA`, a RealSense
+D405-like active stereo sensor), as integrators mount one to look closer than
+the cell's Kinect can. It is on both arms by default (``wrist_camera: null``
+switches it off) and is not a collision body (a D405 is 42 x 42 x 23 mm).
 """
 
 from __future__ import annotations
@@ -34,7 +40,7 @@ from pydantic import Field
 
 from asmteach.core import geometry
 from asmteach.core.arm.robot import ArmRobot, ArmSpec
-from asmteach.core.arm.settings import ArmRobotSettings
+from asmteach.core.arm.settings import ArmRobotSettings, WristCameraMount
 from asmteach.core.arm.sim_gripper import GripperJoints
 from asmteach.core.errors import UserError
 from asmteach.core.models import Mat4
@@ -85,6 +91,16 @@ def _srdf_disabled() -> list[tuple[str, str]]:
 
 SRDF_DISABLED = _srdf_disabled()
 
+WRIST_CAMERA = WristCameraMount(arms=["left", "right"], xyz=(0.055, 0.0, -0.07), rpy_deg=(0.0, 0.0, 90.0))
+"""The wrist depth camera of both arms, in the TCP frame (:mod:`~asmteach.plugins.robots.nextage.hand`).
+
+On the gripper body's +x face (the body is 65 mm thick along x, the camera 42 mm wide: centre 55 mm off the
+approach axis), its front flush with the palm face (70 mm behind the TCP), looking along the approach (z) with
+the image's down (y) toward the fingers (-x of the TCP). A part the TCP is 0.15-0.30 m from is 0.22-0.37 m from
+the camera. The fingertips, 44 mm beside and 87.5 mm in front of it, are 26.7 deg off its axis against a 29 deg
+half field of view: they show as two blobs in the image's bottom 22 rows. Not a collision body.
+"""
+
 
 class NextageSettings(ArmRobotSettings):
     """Settings of the simulated Nextage (metres, radians)."""
@@ -99,6 +115,11 @@ class NextageSettings(ArmRobotSettings):
         None,
         description="the vendor's NextageOpen.urdf (nextage_description) instead of our primitive model; "
         "relative paths from the working directory; our gripper goes on its wrist flanges",
+    )
+    wrist_camera: WristCameraMount | None = Field(
+        default_factory=lambda: WRIST_CAMERA.model_copy(deep=True),
+        description="the depth camera on each hand (a RealSense D405-like stereo camera beside the gripper body, "
+        "looking along the approach); null: none",
     )
     package_paths: list[str] = Field(
         default_factory=list,
