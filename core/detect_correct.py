@@ -9,7 +9,7 @@ every pose are in the world frame, metres.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -123,6 +123,7 @@ def detect_and_correct(
     provisional: bool = False,
     views: Sequence[DepthView] = (),
     symmetries: Sequence[np.ndarray] | None = None,
+    closer: Callable[[Detection], Detection] | None = None,
 ) -> Detection:
     """Detect ``part`` in ``cloud`` ``(n, 3)``, then correct the rough pose when a corrector is given.
 
@@ -138,6 +139,10 @@ def detect_and_correct(
     ambiguous may go on provisionally. ``symmetries``: the part's (part frame; computed when needed and
     ``None``), so that a pose the views cannot tell from the winner by a symmetry is no rival.
 
+    ``closer``: a last resort for a detection every view leaves ambiguous, before it may go on provisionally
+    (the pipeline's look by a wrist camera, :func:`~asmteach.core.pipeline.active_look.look_closer`): it gets the
+    ambiguous detection and returns it settled or as it was.
+
     ``viewpoint`` ((3,), world frame, metres) is the camera centre, or ``None`` for
     the detector's own setting; the corrector gets the viewpoint the detector used
     (``details["viewpoint"]``). ``table=None`` lets the detector find the table and
@@ -152,6 +157,8 @@ def detect_and_correct(
         eye = det.details.get("viewpoint", viewpoint)
         first = DepthView(np.asarray(cloud, dtype=float), None if eye is None else np.asarray(eye, dtype=float))
         det = resolve_by_views(det, part, [first, *views], table, symmetries)
+    if closer is not None and not det.found and det.details.get("ambiguous"):
+        det = closer(det)
     if provisional and not det.found:
         det = provisional_detection(det)
     if not det.found or corrector is None or det.rough is None:

@@ -116,6 +116,15 @@ class ExecutionSettings(StrictModel):
         "down 0.1 mm off as a rule); below this, aiming at what is seen adds more error than it removes",
     )
     reaim_deg: float = Field(1.0, ge=0.0, description="the same, for the rotation of B's assembled pose, degrees")
+    look_closer: int = Field(
+        2,
+        ge=0,
+        le=10,
+        description="viewpoints a wrist depth camera looks from, at most, when the fixed cameras leave a detection "
+        "ambiguous (at detect and at look_again): the arm moves there, senses and comes back, and the rivals are "
+        "judged on every view (asmteach.core.pipeline.active_look); 0 switches it off, and so does a robot without a "
+        "wrist camera",
+    )
     fixture: Literal["auto", "never", "always"] = Field(
         "auto",
         description="a jig holds A while B goes in (asmteach.core.arm.fixture): 'auto' when the plan says A at its "

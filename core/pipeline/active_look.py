@@ -18,7 +18,7 @@ Frames: world, z up, metres; joints in radians; robot time in simulated seconds.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -35,7 +35,7 @@ from asmteach.core.trajectory.batch import batched
 from asmteach.core.trajectory.blended import time_optimal
 from asmteach.core.trajectory.timing import to_trajectory
 
-__all__ = ["LookOutcome", "look_closer", "seen_heightmap", "wrist_arms"]
+__all__ = ["LookOutcome", "closer_for", "look_closer", "seen_heightmap", "wrist_arms"]
 
 ROLLS_DEG = (0.0, 90.0, 180.0, 270.0)
 """Turns of the camera about its optical axis tried for IK: the view is the same, the wrist is not."""
@@ -241,3 +241,41 @@ def look_closer(
                 return out
             break  # a look was made from here: the next viewpoint, not the same one with another arm
     return out
+
+
+def closer_for(
+    run: Any,
+    robot: Any,
+    part: PartModel,
+    views: Sequence[DepthView],
+    table: TablePlane,
+    details: dict[str, Any],
+    known: Sequence[tuple[PartModel, np.ndarray]] = (),
+) -> Callable[[Detection], Detection] | None:
+    """The run's closer look at ``part`` for :func:`~asmteach.core.detect_correct.detect_and_correct` (``None``
+    when ``execution.look_closer`` is 0 or the robot has no wrist camera): the looks go into the stage's
+    ``details["looks"][part]`` and their robot seconds onto the report's robot clock (total and ``look``)."""
+    ex = run.execution
+    if ex.look_closer <= 0 or not wrist_arms(robot):
+        return None
+
+    def look(det: Detection) -> Detection:
+        out = look_closer(
+            robot,
+            det,
+            part,
+            views,
+            table,
+            run.plugin("motion_planner"),
+            looks=ex.look_closer,
+            frames=ex.depth_frames,
+            symmetries=run.symmetries(part),
+            known=known,
+        )
+        details.setdefault("looks", {})[part.name] = out.looks
+        clock = run.report.robot_seconds
+        clock["total"] = round(clock.get("total", 0.0) + out.robot_seconds, 3)
+        clock["look"] = round(clock.get("look", 0.0) + out.robot_seconds, 3)
+        return out.detection
+
+    return look

@@ -13,6 +13,7 @@ from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import PartModel, Robot
 from asmteach.core.models import Detection, TablePlane
 from asmteach.core.perception.second_view import DepthView
+from asmteach.core.pipeline.active_look import closer_for
 from asmteach.core.pipeline.stage import Run, StageFailed
 from asmteach.core.pose_error import pose_error
 from asmteach.core.scene import random_start_poses
@@ -77,6 +78,10 @@ def detect_stage(
                 provisional=again,
                 views=views[1:],
                 symmetries=run.symmetries(part) if len(views) > 1 else None,
+                # the fixed cameras left it ambiguous: a wrist camera looks closer (parts found so far in the way)
+                closer=closer_for(
+                    run, robot, part, views, table, d, [(p, out[p.name].best) for p in parts if p.name in out]
+                ),
             )
             if not det.found or det.rough is None:
                 run.report.detections.append(det)

@@ -13,6 +13,7 @@ from asmteach.core.failures import FailureCause
 from asmteach.core.interfaces import AssemblyProblem, PartModel, Robot
 from asmteach.core.io import to_jsonable, write_model
 from asmteach.core.models import AssemblyTask, Detection, Plan, TablePlane
+from asmteach.core.pipeline.active_look import closer_for
 from asmteach.core.pipeline.detect import not_found_cause, sense_views
 from asmteach.core.pipeline.stage import Run, StageFailed
 from asmteach.core.pose_error import nearest_symmetric, pose_error
@@ -121,6 +122,8 @@ def look_again_stage(
             viewpoint=views[0].viewpoint,
             views=views[1:],
             symmetries=run.symmetries(a),
+            # A at its goal still a twin of another pose: a wrist camera looks closer (B where it was found)
+            closer=closer_for(run, robot, a, views, table, d, [(b, detections[b.name].best)]),
         )
         if not det.found or det.rough is None:
             if detections[a.name].details.get("ambiguous"):
