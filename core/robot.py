@@ -231,7 +231,11 @@ def _frozen(a: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True, eq=False)  # eq=False: numpy arrays have no single truth value to compare by
 class WristCamera:
     """A depth camera carried by an arm's hand: ``T_tcp_cam`` ``(4, 4)`` is its OpenCV frame (z forward, y down)
-    in the arm's TCP frame (metres), so ``T_world_cam = fk(arm, q) @ T_tcp_cam``; ``sensor`` is its model."""
+    in the arm's TCP frame (metres), so ``T_world_cam = fk(arm, q) @ T_tcp_cam``; ``sensor`` is its model.
+
+    To put the camera at ``T_world_cam`` ask IK for ``T_world_cam @ inv(T_tcp_cam)`` and refuse an
+    ``IKResult.flipped`` solution: the jaw is symmetric but the camera is not (turned by pi about the
+    approach it would sit on the hand's other side)."""
 
     T_tcp_cam: np.ndarray
     sensor: KinectSettings
