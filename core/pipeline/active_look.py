@@ -253,8 +253,9 @@ def closer_for(
     known: Sequence[tuple[PartModel, np.ndarray]] = (),
 ) -> Callable[[Detection], Detection] | None:
     """The run's closer look at ``part`` for :func:`~asmteach.core.detect_correct.detect_and_correct` (``None``
-    when ``execution.look_closer`` is 0 or the robot has no wrist camera): the looks go into the stage's
-    ``details["looks"][part]`` and their robot seconds onto the report's robot clock (total and ``look``)."""
+    when ``execution.look_closer`` is 0 or the robot has no wrist camera; one wrist frame per look): the looks go
+    into the stage's ``details["looks"][part]`` and their robot seconds onto the report's robot clock (total and
+    ``look``)."""
     ex = run.execution
     if ex.look_closer <= 0 or not wrist_arms(robot):
         return None
@@ -268,7 +269,10 @@ def closer_for(
             table,
             run.plugin("motion_planner"),
             looks=ex.look_closer,
-            frames=ex.depth_frames,
+            # one frame, not execution.depth_frames: stacked frames of one close view repeat its systematic
+            # misfit (edges, the rivals' fit) and the paired test would count each copy as new evidence (d_peg 0
+            # seed 7: four frames of a look accepted a block turned 180 deg, closest rival z 5.01)
+            frames=1,
             symmetries=run.symmetries(part),
             known=known,
         )
