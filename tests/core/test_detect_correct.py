@@ -119,3 +119,25 @@ def test_a_hull_twin_ambiguity_is_found_only_for_a_caller_that_looks_again(part:
     cloud = np.zeros((10, 3))
     assert not detect_and_correct(_Ambiguous(), None, cloud, part).found
     assert detect_and_correct(_Ambiguous(), None, cloud, part, provisional=True).found
+
+
+def test_a_closer_look_comes_before_going_on_provisionally(part: PartModel) -> None:
+    cloud = np.zeros((10, 3))
+    asked: list[Detection] = []
+
+    def settles(det: Detection) -> Detection:
+        asked.append(det)
+        rival = np.asarray(det.details["ambiguous"][1]["T_world_part"])
+        return det.model_copy(update={"found": True, "reason": None, "rough": rival})
+
+    det = detect_and_correct(_Ambiguous(), None, cloud, part, provisional=True, closer=settles)
+    assert len(asked) == 1 and not asked[0].found  # asked before the provisional guess
+    assert det.found and "provisional" not in det.details
+    assert np.allclose(det.rough, np.asarray(_ambiguous("hull_twin").details["ambiguous"][1]["T_world_part"]))
+    # what the look leaves ambiguous still goes on provisionally; a found part is never looked at
+    assert detect_and_correct(_Ambiguous(), None, cloud, part, provisional=True, closer=lambda d: d).details[
+        "provisional"
+    ]
+    T = np.eye(4)
+    detect_and_correct(_Found(T), None, _cloud(part, T), part, closer=settles)
+    assert len(asked) == 1
