@@ -5,7 +5,7 @@ Robot plugins build on it (the Nextage, ``urdf_arm``); it depends on the core on
 - :mod:`~asmteach.core.arm.robot`: :class:`ArmRobot` (a :class:`~asmteach.core.interfaces.Robot` and
   :class:`~asmteach.core.robot.World`) and :class:`ArmSpec` (one arm as a subclass describes it);
 - :mod:`~asmteach.core.arm.settings`: :class:`ArmRobotSettings` (the keys every arm robot shares) and its
-  :class:`CameraMount`;
+  :class:`CameraMount` and :class:`WristCameraMount`;
 - :mod:`~asmteach.core.arm.scene`: :class:`ArmScene`, its :class:`~asmteach.core.robot.PlanningScene`;
 - :mod:`~asmteach.core.arm.kinematics`: URDF kinematics (arm chains, joint limits, FK, Jacobian, IK entry point);
 - :mod:`~asmteach.core.arm.dls_ik`: the damped-least-squares IK solver and its settings;
@@ -16,7 +16,7 @@ Robot plugins build on it (the Nextage, ``urdf_arm``); it depends on the core on
 - :mod:`~asmteach.core.arm.obb`: vectorised oriented-box overlap and gap;
 - :mod:`~asmteach.core.arm.sim`: the PyBullet world (robot, table, parts, trajectory execution);
 - :mod:`~asmteach.core.arm.sim_gripper`: :class:`GripperJoints` and gripping in that world;
-- :mod:`~asmteach.core.arm.sim_camera`: its RGB camera images;
+- :mod:`~asmteach.core.arm.sim_camera`: its RGB camera images and the wrist camera a mount describes;
 - :mod:`~asmteach.core.arm.plan_check`: the independent re-check of a plan (its rules and results);
 - :mod:`~asmteach.core.arm.plan_checker`: its replay in a PyBullet world (:func:`recheck_plan`);
 - :mod:`~asmteach.core.arm.link_spheres`: the re-check's bounding spheres and joint reach bounds;
