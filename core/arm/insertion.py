@@ -36,7 +36,8 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from asmteach.core import geometry
-from asmteach.core.arm.insertion_search import PushSearch
+from asmteach.core.arm.compliance import TorqueTurn, TurnSettings, torque_about, turn_about
+from asmteach.core.arm.insertion_search import PushSearch, perpendicular, spiral
 from asmteach.core.models import Trajectory
 
 __all__ = [
@@ -56,12 +57,14 @@ class PartContact:
     """The contact between two parts: total normal force (N) and its force-weighted point (world, metres),
     with the first part's centre of mass (world, metres) to say on which side of it the contact acts, and the
     total force on the first part (``force_world``, world, newtons: each normal force along its normal; None
-    when the world does not say)."""
+    when the world does not say) and its moment about the world origin (``torque_world``, N m; None when the world
+    does not say): with the force, the wrench a wrist F/T sensor reads, about any point."""
 
     force_n: float
     point_world: np.ndarray | None
     com_world: np.ndarray
     force_world: np.ndarray | None = None
+    torque_world: np.ndarray | None = None
 
 
 SIDEWAYS_SHARE = 0.1
@@ -89,7 +92,8 @@ class InsertionSettings:
     parts); ``seated_m``: resistance this close to the planned end is the part seated; ``backoff_m``: how far
     it backs out before a sideways correction; ``search_step_m`` and ``search_radius_m``: size of one sideways
     correction and the farthest it shifts the line; ``max_tries``: corrections before it gives up (a jam);
-    ``other_moved_m``: the other part pushed this far is resistance.
+    ``other_moved_m``: the other part pushed this far is resistance; ``turn``: the torque-guided turns tried at
+    each resistance before a sideways shift (:mod:`asmteach.core.arm.compliance`).
     """
 
     step_m: float = 0.0005
@@ -102,6 +106,7 @@ class InsertionSettings:
     search_radius_m: float = 0.0025
     max_tries: int = 16
     other_moved_m: float = 0.0005
+    turn: TurnSettings = field(default_factory=TurnSettings)
 
 
 @dataclass
@@ -145,6 +150,9 @@ class InsertionOutcome:
     realigned_mm: float = 0.0
     realigned_deg: float = 0.0
     """How far (mm, deg) the line's end TCP was re-aimed for the part's measured pose in the hand (0: as planned)."""
+    turns_deg: list[float] = field(default_factory=list)
+    T_turn: np.ndarray = field(default_factory=lambda: np.eye(4))
+    """The torque-guided turns (degrees each) and the world transform they applied to the line's TCP poses."""
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready, in millimetres (the execution trace's unit)."""
@@ -169,6 +177,8 @@ class InsertionOutcome:
             "other_moved_t_s": None if self.other_moved_t_s is None else round(self.other_moved_t_s, 3),
             "realigned_mm": round(self.realigned_mm, 2),
             "realigned_deg": round(self.realigned_deg, 2),
+            "turns_deg": [round(a, 2) for a in self.turns_deg],
+            "turned_deg": round(float(np.degrees(geometry.rotation_angle(self.T_turn[:3, :3]))), 2),
             "reason": self.reason,
         }
 
@@ -184,6 +194,7 @@ class _Guard:
         other: str | None,
         s: InsertionSettings,
         line_end: np.ndarray | None = None,
+        centre_tcp: np.ndarray | None = None,
     ) -> None:
         self.robot, self.arm, self.part, self.other, self.s = robot, traj.arm, part, other, s
         pos = np.asarray(traj.positions, dtype=float)
@@ -196,7 +207,10 @@ class _Guard:
             self.T_end = np.asarray(line_end, dtype=float).copy()
             self.T_start = self.T_end.copy()
             self.T_start[:3, 3] = self.T_end[:3, 3] - self.length * self.d
-        self.u, self.w = _perpendicular(self.d)
+        self.u, self.w = perpendicular(self.d)
+        self.centre_tcp = np.zeros(3) if centre_tcp is None else np.asarray(centre_tcp, dtype=float)
+        self.R_turn = np.eye(3)  # the torque-guided turn of the hand about the compliance centre (world)
+        self.contact: PartContact | None = None
         T_tcp = robot.fk(self.arm, robot.current(self.arm))
         self.T_tcp_part = geometry.invert(T_tcp) @ robot.part_pose(part)  # the part in the hand now
         self.T_other0 = robot.part_pose(other) if other else None
@@ -211,10 +225,23 @@ class _Guard:
         self.v_max = np.asarray(robot.speed_limits(self.arm), dtype=float)
 
     def pose_at(self, s: float, offset: np.ndarray) -> np.ndarray:
-        """The TCP pose ``s`` metres along the line shifted sideways by ``offset`` (planned end's orientation)."""
+        """The TCP pose ``s`` metres along the line shifted sideways by ``offset`` (planned end's orientation),
+        turned by ``R_turn`` about the compliance centre."""
         T = self.T_end.copy()
         T[:3, 3] = self.T_start[:3, 3] + s * self.d + offset
-        return T
+        return self.turn(T) @ T
+
+    def turn(self, T: np.ndarray) -> np.ndarray:
+        """The world transform of the hand's turn for the unturned TCP pose ``T``: ``R_turn`` about the centre."""
+        return turn_about(self.R_turn, T[:3, :3] @ self.centre_tcp + T[:3, 3])
+
+    def torque(self) -> np.ndarray | None:
+        """The last reading's contact torque about the compliance centre where the encoders put it (N m, world)."""
+        if self.contact is None:
+            return None
+        T_tcp = self.robot.fk(self.arm, self.robot.current(self.arm))
+        centre = T_tcp[:3, :3] @ self.centre_tcp + T_tcp[:3, 3]
+        return torque_about(self.contact.force_world, self.contact.torque_world, centre)
 
     def move_to(self, T: np.ndarray) -> bool:
         """One short step of the TCP to ``T`` (False when IK fails there)."""
@@ -259,7 +286,7 @@ class _Guard:
         force, away = float("nan"), None
         if self.other is not None and isinstance(self.robot, ContactSensing):
             c = self.robot.part_contact(self.part, self.other)
-            force = c.force_n
+            force, self.contact = c.force_n, c
             if c.force_world is not None and c.force_n > 0.0:
                 push = c.force_world - np.dot(c.force_world, self.d) * self.d
                 n = float(np.linalg.norm(push))
@@ -286,21 +313,6 @@ class _Guard:
         )
 
 
-def _perpendicular(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two unit vectors perpendicular to ``d`` and to each other."""
-    a = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(d, a)
-    u /= np.linalg.norm(u)
-    return u, np.cross(d, u)
-
-
-def _spiral(k: int, pitch: float, u: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """The ``k``-th point (k >= 1) of an Archimedean spiral with ``pitch`` metres between points and turns."""
-    theta = np.sqrt(4.0 * np.pi * k)  # equal arc length between points
-    r = pitch * theta / (2.0 * np.pi)
-    return r * (np.cos(theta) * u + np.sin(theta) * w)
-
-
 def realigned_line_end(T_end: np.ndarray, T_tcp_part_planned: np.ndarray, T_tcp_part_held: np.ndarray) -> np.ndarray:
     """The TCP pose (world, metres) that puts the part held at ``T_tcp_part_held`` (measured in the hand) where
     the planned end ``T_end`` puts it as the plan assumed it held (``T_tcp_part_planned``): ``T_end @
@@ -318,6 +330,7 @@ def guarded_insert(
     other: str | None = None,
     settings: InsertionSettings | None = None,
     line_end: np.ndarray | None = None,
+    centre_tcp: np.ndarray | None = None,
 ) -> InsertionOutcome:
     """Run the insertion ``traj`` (a straight TCP line holding ``part``) force-guided; see the module doc.
 
@@ -326,14 +339,16 @@ def guarded_insert(
     and its contacts read when the world is :class:`ContactSensing`). The arm starts at the trajectory's start.
     ``line_end`` (``T_world_tcp``, from :func:`realigned_line_end`) re-aims the line: the arm first moves to
     its start (the planned direction and length back from ``line_end``); with no IK there, the planned line
-    runs. Returns the :class:`InsertionOutcome`; it never raises on a jam (the part stays where it stopped,
-    eased back to the depth where the force stayed under the limit).
+    runs. ``centre_tcp`` (TCP frame, metres; default the TCP) is the compliance centre the hand turns about
+    (:func:`~asmteach.core.arm.compliance.leading_point`). Returns the :class:`InsertionOutcome`; it never
+    raises on a jam (the part stays where it stopped, eased back to the depth where the force stayed under the
+    limit).
     """
     s = settings or InsertionSettings()
-    g = _Guard(robot, traj, part, other, s)
+    g = _Guard(robot, traj, part, other, s, centre_tcp=centre_tcp)
     if line_end is not None:
         planned = robot.fk(traj.arm, np.asarray(traj.positions, dtype=float)[-1])
-        aimed = _Guard(robot, traj, part, other, s, line_end)
+        aimed = _Guard(robot, traj, part, other, s, line_end, centre_tcp)
         if aimed.length >= 1e-6 and aimed.move_to(aimed.pose_at(0.0, np.zeros(3))):
             g = aimed
             g.settle_other()  # the turn may nudge the other part: resistance counts from here
@@ -349,6 +364,7 @@ def guarded_insert(
     offset = np.zeros(3)
     pos, best_depth, tries, spiral_k = 0.0, 0.0, 0, 0
     search = PushSearch(s.search_step_m, s.search_radius_m)
+    turner = TorqueTurn(s.turn, progress_m=s.step_m)
     steps = max(1, int(np.ceil(g.length / s.step_m)))
     while True:
         target = min(g.length, pos + g.length / steps)
@@ -368,20 +384,28 @@ def guarded_insert(
             out.inserted = True  # it met the seat (a blind hole's bottom, a stop) where the plan ends
             break
         out.contacts.append(InsertionContact(depth, force, slip, g.seconds, float(np.linalg.norm(offset))))
-        tries += 1
+        turn = turner.next(g.torque(), depth)
+        tries += not turn
         if tries > s.max_tries:
             out.reason = f"still resisted after {s.max_tries} sideways corrections"
             break
-        # back off (the hand's spring lets go of the part), then shift the line sideways
+        # back off (the hand's spring lets go of the part), then turn the hand or shift the line sideways
         pos = max(0.0, pos - s.backoff_m - slip)
         g.move_to(g.pose_at(pos, offset))
+        g.R_turn = turner.R  # a new turn to try, or the last one taken back (the sideways shift makes that move)
+        if turn:  # yield to the contact's torque, as a compliant wrist would, and advance again
+            if g.move_to(g.pose_at(pos, offset)):
+                g.settle_other()
+                continue
+            g.R_turn = turner.unreached()  # no IK for the turned hand: this resistance goes to the sideways search
+            tries += 1
         new = search.next(offset, away)
         if new is None:
             spiral_k += 1
-            new = _spiral(spiral_k, s.search_step_m, g.u, g.w)
+            new = spiral(spiral_k, s.search_step_m, g.u, g.w)
         if np.linalg.norm(new) > s.search_radius_m:
             spiral_k += 1
-            new = _spiral(spiral_k, s.search_step_m, g.u, g.w)
+            new = spiral(spiral_k, s.search_step_m, g.u, g.w)
             if np.linalg.norm(new) > s.search_radius_m:
                 out.reason = f"no way in within {1000.0 * s.search_radius_m:.1f} mm sideways"
                 break
@@ -392,6 +416,9 @@ def guarded_insert(
         g.settle_other()
     out.depth_m = best_depth if not out.inserted else max(best_depth, g.reading(pos, offset)[2])
     out.correction_m = offset
+    out.turns_deg, out.T_turn = list(turner.steps_deg), g.turn(g.pose_at(g.length, offset))
+    if not out.inserted:
+        out.reason += turner.note()
     out.seconds = g.seconds
     out.other_moved_m, out.other_moved_t_s = g.other_moved, g.other_moved_t
     return out

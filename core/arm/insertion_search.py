@@ -10,14 +10,15 @@ And one fixed step (0.4 mm) jumps back and forth over a play narrower than itsel
 :class:`PushSearch` follows the push (each reading's own direction: real contact readings are noisy, tens of
 degrees), halves its step each time the push turns back (the part crossed the axis of what it goes into), and
 when the shifts reach the search radius without a crossing, goes back to where the search began and follows
-the push the other way. Metres, world frame (offsets perpendicular to the insertion line).
+the push the other way; with no push read, the offsets follow a :func:`spiral`. Metres, world frame (offsets
+perpendicular to the insertion line).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["PushSearch"]
+__all__ = ["PushSearch", "perpendicular", "spiral"]
 
 
 class PushSearch:
@@ -53,3 +54,18 @@ class PushSearch:
         # this sense led to the edge of the search without a crossing: the push points away from the way in
         self.sense, self.h, self.prev = -1.0, self.step, None
         return self.origin - self.step * self.first
+
+
+def perpendicular(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors perpendicular to ``d`` and to each other."""
+    a = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(d, a)
+    u /= np.linalg.norm(u)
+    return u, np.cross(d, u)
+
+
+def spiral(k: int, pitch: float, u: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """The ``k``-th point (k >= 1) of an Archimedean spiral with ``pitch`` metres between points and turns."""
+    theta = np.sqrt(4.0 * np.pi * k)  # equal arc length between points
+    r = pitch * theta / (2.0 * np.pi)
+    return r * (np.cos(theta) * u + np.sin(theta) * w)

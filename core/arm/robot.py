@@ -316,24 +316,10 @@ class ArmRobot(Robot, World):
         return self.sim.part_pose(name)
 
     def part_contact(self, part: str, other: str) -> PartContact:
-        """The contact between two parts now: total normal force (N), its force-weighted point on ``part``,
-        ``part``'s centre of mass (world, metres) and the total force on ``part`` (world, N); what
-        :func:`~asmteach.core.arm.insertion.guarded_insert` reads
-        (:class:`~asmteach.core.arm.insertion.ContactSensing`)."""
-        sim = self.sim
-        for name in (part, other):
-            if name not in sim.parts:
-                raise UserError(f"no part named {name!r} in the simulated world (have {sorted(sim.parts)})")
-        body, other_body = sim.parts[part][0], sim.parts[other][0]
-        com = np.asarray(sim.p.getBasePositionAndOrientation(body)[0], dtype=float)
-        points = sim.p.getContactPoints(body, other_body)
-        force = float(sum(c[9] for c in points))
-        if force <= 1e-9:
-            return PartContact(force, None, com)
-        where = sum(c[9] * np.asarray(c[5], dtype=float) for c in points) / force
-        # contactNormalOnB points from the other part to ``part``: each normal force pushes ``part`` along it
-        push = sum(c[9] * np.asarray(c[7], dtype=float) for c in points)
-        return PartContact(force, where, com, np.asarray(push, dtype=float))
+        """The contact between two parts now (:meth:`~asmteach.core.arm.sim.PyBulletWorld.part_contact`: the
+        normal forces' total, point, push and moment); what :func:`~asmteach.core.arm.insertion.guarded_insert`
+        reads (:class:`~asmteach.core.arm.insertion.ContactSensing`)."""
+        return self.sim.part_contact(part, other)
 
     def camera_pose(self, view: int = 0) -> np.ndarray:
         """``T_world_cam`` (OpenCV frame) of depth camera ``view`` (0: the one the RGB camera shares)."""

@@ -29,6 +29,7 @@ import pybullet
 from pybullet_utils import bullet_client
 
 from asmteach.core import geometry
+from asmteach.core.arm.insertion import PartContact
 from asmteach.core.convex_pieces import decompose
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel
@@ -260,6 +261,26 @@ class PyBulletWorld:
         T_part_com = np.eye(4)
         T_part_com[:3, 3] = part.center_of_mass
         return T_com @ np.linalg.inv(T_part_com)
+
+    def part_contact(self, part: str, other: str) -> PartContact:
+        """The contact between two spawned parts now: total normal force (N), its force-weighted point on
+        ``part``, ``part``'s centre of mass (world, metres), the total force on ``part`` (world, N) and its moment
+        about the world origin (N m): the wrench a wrist F/T sensor reads when the hand holds ``part``. Normal
+        forces only: PyBullet's friction directions do not say on which of the two bodies they act."""
+        for name in (part, other):
+            if name not in self.parts:
+                raise UserError(f"no part named {name!r} in the simulated world (have {sorted(self.parts)})")
+        body, other_body = self.parts[part][0], self.parts[other][0]
+        com = np.asarray(self.p.getBasePositionAndOrientation(body)[0], dtype=float)
+        points = self.p.getContactPoints(body, other_body)
+        force = float(sum(c[9] for c in points))
+        if force <= 1e-9:
+            return PartContact(force, None, com)
+        where = sum(c[9] * np.asarray(c[5], dtype=float) for c in points) / force
+        # contactNormalOnB points from the other part to ``part``: each normal force pushes ``part`` along it
+        push = sum(c[9] * np.asarray(c[7], dtype=float) for c in points)
+        moment = sum(c[9] * np.cross(c[5], c[7]) for c in points)
+        return PartContact(force, where, com, np.asarray(push, dtype=float), np.asarray(moment, dtype=float))
 
     # ------------------------------------------------------------ motion
     def step(self, n: int = 1) -> None:

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from asmteach.core import geometry
+from asmteach.core.arm.compliance import leading_point
 from asmteach.core.arm.fixture import clamp_part, jig_decision
 from asmteach.core.arm.insertion import guarded_insert, realigned_line_end
 from asmteach.core.failures import FailureCause
@@ -230,6 +231,22 @@ def _follow_reaimed(robot: Robot, traj: Any, C: np.ndarray) -> float:
     return seconds + dt
 
 
+def _compliance_centre(
+    robot: Robot, arm: str, part: str, trace: ExecutionTrace, T_start: np.ndarray, T_end: np.ndarray
+) -> np.ndarray | None:
+    """The point (TCP frame, metres) the guarded insertion turns the hand about: the leading end of ``part`` as
+    the plan believes it held, along the insertion line ``T_start`` -> ``T_end`` (TCP poses, world)
+    (:func:`~asmteach.core.arm.compliance.leading_point`); None (the TCP) with no belief or model of the part."""
+    belief = _held_belief(robot, arm, part, trace)
+    delta = T_end[:3, 3] - T_start[:3, 3]
+    if belief is None or np.linalg.norm(delta) < 1e-6:
+        return None
+    planned, held = belief
+    vertices = geometry.transform_points(planned, np.asarray(held.part.mesh.vertices, dtype=float))
+    com = geometry.transform_points(planned, np.asarray(held.part.center_of_mass, dtype=float)[None])[0]
+    return leading_point(vertices, com, T_end[:3, :3].T @ delta)
+
+
 def _insert(run: Run, robot: Robot, seg: Any, trace: ExecutionTrace, aim: dict[str, np.ndarray]) -> float | None:
     """Run an insertion guarded (:func:`~asmteach.core.arm.insertion.guarded_insert`) when its arm holds a part,
     re-aimed for the part's pose measured in the hand (:func:`_line_end`); the robot seconds it took, or None
@@ -247,9 +264,12 @@ def _insert(run: Run, robot: Robot, seg: Any, trace: ExecutionTrace, aim: dict[s
     line_end = None
     if measured is not None and measured.T_world_part is not None:
         line_end = _line_end(run, robot, arm, part, trace, T_end, measured.T_world_part, measured.chi2)
-    outcome = guarded_insert(robot, seg.trajectory, part, other, line_end=line_end)
-    if line_end is not None and (outcome.realigned_mm > 0.0 or outcome.realigned_deg > 0.0):
-        aim[arm] = line_end @ geometry.invert(T_end)
+    centre = _compliance_centre(robot, arm, part, trace, robot.fk(arm, q[0]), T_end)
+    outcome = guarded_insert(robot, seg.trajectory, part, other, line_end=line_end, centre_tcp=centre)
+    reaimed = line_end is not None and (outcome.realigned_mm > 0.0 or outcome.realigned_deg > 0.0)
+    C = line_end @ geometry.invert(T_end) if reaimed and line_end is not None else np.eye(4)
+    if reaimed or outcome.turns_deg:  # the retreat leaves the way the hand went in: re-aimed and turned
+        aim[arm] = outcome.T_turn @ C
     trace.insertion(seg.label, part, other, outcome, robot.fk(arm, q[0]), robot.fk(arm, q[-1]))
     if not outcome.inserted:
         # the plan goes on from the end of the insertion: the arm is not there, and the part is not in

@@ -89,7 +89,9 @@ def test_an_insertion_that_stops_short_fails_the_execute_stage_as_a_jam(monkeypa
     stuck.contacts = []
     report = RunReport(config={}, seed=0)
     seg = PlanSegment(label="insert peg at assembled", trajectory=_traj(1.0), kind="insertion")
-    monkeypatch.setattr(execute, "guarded_insert", lambda robot, traj, part, other, line_end=None: stuck)
+    monkeypatch.setattr(
+        execute, "guarded_insert", lambda robot, traj, part, other, line_end=None, centre_tcp=None: stuck
+    )
     run = SimpleNamespace(report=report, symmetries=lambda part: [])
     with pytest.raises(StageFailed) as failed:
         execute._insert(run, world, seg, trace, {})  # type: ignore[arg-type]

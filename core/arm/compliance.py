@@ -1,0 +1,161 @@
+"""Torque-guided turns of a guarded insertion: the hand yields to the contact's moment, as a compliant wrist does.
+
+A part held a degree or two off the axis of a long guide (a dovetail slider in its groove, a T-slider in its
+slot: a few tenths of a millimetre of play over 40-80 mm) meets the guide's mouth with a corner or an edge and
+stops however far the line is shifted sideways. A real cell turns it into line with the guide itself: a remote
+centre compliance lets the wrist rotate about a point near the part's leading end, or the controller rotates the
+hand to null the torque its wrist force/torque sensor reads. :class:`TorqueTurn` is that controller, one
+admittance step per resistance: ``dtheta = K * tau`` (radians per newton-metre), bounded per step and in all, the
+gain halved each time the torque turns back (the part crossed the guide's line).
+
+Only what a wrist F/T sensor and the joint encoders give drives it: the contact force and its moment
+(:class:`~asmteach.core.arm.insertion.PartContact`'s ``force_world`` and ``torque_world``, moved to the
+compliance centre) and the TCP pose from forward kinematics; the centre itself is a point of the part's model
+where the plan believes it held (:func:`leading_point`), as a tool's compliance centre is configured.
+Units: metres, newtons, newton-metres, radians (degrees where a name says so). Frames: world unless named.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from asmteach.core import geometry
+
+__all__ = ["TorqueTurn", "TurnSettings", "leading_point", "torque_about", "turn_about"]
+
+
+@dataclass(frozen=True)
+class TurnSettings:
+    """The admittance of the torque-guided turn.
+
+    ``gain_rad_per_nm``: turn per newton-metre of contact torque about the compliance centre; ``step_max_deg``
+    and ``total_max_deg``: the most one turn and all turns together rotate the hand; ``min_torque_nm``: a smaller
+    torque says nothing (a part pressing square on a stop); ``max_turns``: turns before only the sideways
+    search goes on; ``enabled``: False runs the guarded insertion without turns (as before Session 16).
+    """
+
+    gain_rad_per_nm: float = 0.15
+    step_max_deg: float = 1.0
+    total_max_deg: float = 3.0
+    min_torque_nm: float = 0.02
+    max_turns: int = 6
+    enabled: bool = True
+
+
+def torque_about(
+    force_world: np.ndarray | None, torque_world: np.ndarray | None, point: np.ndarray
+) -> np.ndarray | None:
+    """The moment (N m, world) about ``point`` (world, metres) of a wrench given as its force (N) and its moment
+    about the world origin; None when either is unknown."""
+    if force_world is None or torque_world is None:
+        return None
+    return np.asarray(torque_world, dtype=float) - np.cross(np.asarray(point, dtype=float), force_world)
+
+
+def turn_about(R: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """The 4x4 world transform that rotates by ``R`` (3x3, world) about ``centre`` (world, metres)."""
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = np.asarray(centre, dtype=float) - R @ np.asarray(centre, dtype=float)
+    return T
+
+
+def leading_point(vertices_tcp: np.ndarray, com_tcp: np.ndarray, direction_tcp: np.ndarray) -> np.ndarray:
+    """The compliance centre (TCP frame, metres): the point of the line through the part's centre of mass
+    ``com_tcp`` along the insertion ``direction_tcp`` (unit) level with the part's leading vertex (its most
+    advanced one along the direction). Turning about it leaves the part's front where it is, as a remote
+    centre compliance placed at a peg's tip does."""
+    d = np.asarray(direction_tcp, dtype=float)
+    d = d / np.linalg.norm(d)
+    c = np.asarray(com_tcp, dtype=float)
+    lead = float(np.max(np.asarray(vertices_tcp, dtype=float) @ d))
+    return c + (lead - float(c @ d)) * d
+
+
+class TorqueTurn:
+    """The hand's turns from the contact torque read at each resistance (:class:`TurnSettings`).
+
+    :meth:`next` takes the torque about the compliance centre and the depth the part stopped at, and says
+    whether to try a turn before any sideways shift. A turn must pay: the next resistance met
+    ``progress_m`` deeper or it is taken back, and no turn is tried again until the part gets past where it
+    stopped. A part whose front rests on the guide's rim beside the mouth feels a torque that turns it the
+    wrong way; once the sideways search has its front in the mouth, the guide's walls turn it into line.
+    ``R`` is the hand's total turn (3x3, world); ``steps_deg`` lists the turns kept.
+    """
+
+    def __init__(self, settings: TurnSettings | None = None, progress_m: float = 0.0005) -> None:
+        self.s = settings or TurnSettings()
+        self.progress_m = progress_m
+        self.R = np.eye(3)
+        self.gain = self.s.gain_rad_per_nm
+        self.prev: np.ndarray | None = None
+        self.steps_deg: list[float] = []
+        self.last_torque_nm = 0.0
+        self.step_max = np.radians(self.s.step_max_deg)
+        self.unreachable = 0  # turns the arm could not make (no IK)
+        self.unpaid = 0  # turns taken back: the part went no deeper
+        self._R_before = np.eye(3)
+        self._tried_at: float | None = None  # depth (metres) of the resistance the last turn answered
+        self._paused_at: float | None = None  # no turn until the part gets deeper than this
+
+    @property
+    def total_deg(self) -> float:
+        """The hand's total turn so far (degrees)."""
+        return float(np.degrees(geometry.rotation_angle(self.R)))
+
+    def next(self, torque: np.ndarray | None, depth: float) -> bool:
+        """After a resistance at ``depth`` (metres) with contact ``torque`` (N m, world, about the compliance
+        centre): True when :attr:`R` holds a new turn to try, else False (:attr:`R` may have been taken back)."""
+        if self._tried_at is not None:
+            if depth < self._tried_at + self.progress_m:
+                self._take_back()
+                self.unpaid += 1
+                self._paused_at = max(depth, self._tried_at)
+            self._tried_at = None
+        if self._paused_at is not None and depth < self._paused_at + self.progress_m:
+            return False
+        made = len(self.steps_deg) + self.unreachable + self.unpaid
+        if torque is None or not self.s.enabled or made >= self.s.max_turns:
+            return False
+        tau = np.asarray(torque, dtype=float)
+        n = float(np.linalg.norm(tau))
+        self.last_torque_nm = n
+        if n < self.s.min_torque_nm:
+            return False
+        if self.prev is not None and float(tau @ self.prev) < 0.0:
+            self.gain *= 0.5  # turned past the guide's line: the way in lies between the last two turns
+        self.prev = tau
+        angle = min(self.gain * n, self.step_max)
+        R = geometry.from_rotvec(angle * tau / n)[:3, :3] @ self.R
+        if geometry.rotation_angle(R) > np.radians(self.s.total_max_deg) + 1e-9:
+            return False
+        self._R_before, self.R = self.R, R
+        self.steps_deg.append(float(np.degrees(angle)))
+        self._tried_at = depth
+        return True
+
+    def unreached(self) -> np.ndarray:
+        """Take the last turn back because the arm could not make it (no IK) and halve the turns after it; the
+        total turn (3x3, world) to go on with."""
+        self._take_back()
+        self._tried_at = None
+        self.unreachable += 1
+        self.step_max *= 0.5
+        return self.R
+
+    def _take_back(self) -> None:
+        self.R = self._R_before
+        self.steps_deg.pop()
+
+    def note(self) -> str:
+        """What the turns did, for a jam's reason."""
+        if not self.s.enabled:
+            return ""
+        extra = f", {self.unpaid} taken back (no deeper)" if self.unpaid else ""
+        extra += f", {self.unreachable} out of the arm's reach" if self.unreachable else ""
+        if not self.steps_deg:
+            return f"; no turn kept (contact torque {self.last_torque_nm:.3f} N m{extra})"
+        steps = ", ".join(f"{a:.2f}" for a in self.steps_deg)
+        return f"; turned {len(self.steps_deg)} times ({steps} deg), {self.total_deg:.2f} deg in all{extra}"
