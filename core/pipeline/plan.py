@@ -18,7 +18,7 @@ from asmteach.core.pipeline.detect import not_found_cause, sense_views
 from asmteach.core.pipeline.stage import Run, StageFailed
 from asmteach.core.pose_error import nearest_symmetric, pose_error
 
-__all__ = ["grasps_stage", "look_again_stage", "plan_stage"]
+__all__ = ["grasps_stage", "look_again_stage", "plan_stage", "went_on_guessing"]
 
 
 def grasps_stage(run: Run, robot: Robot, a: PartModel, b: PartModel) -> dict[str, list]:
@@ -126,9 +126,9 @@ def look_again_stage(
             closer=closer_for(run, robot, a, views, table, d, [(b, detections[b.name].best)]),
         )
         if not det.found or det.rough is None:
-            if detections[a.name].details.get("ambiguous"):
-                # The first detection was ambiguous, so going on blind is a guess; the cause is the detection
-                # that failed here (as at the detect stage), which lists rivals only if it too was ambiguous.
+            if went_on_guessing(detections[a.name]):
+                # going on blind is a guess; the cause is the detection that failed here (as at the detect
+                # stage), which lists rivals only if it too was ambiguous.
                 raise StageFailed(f"{a.name} not found again at its goal: {det.reason}", cause=not_found_cause(det))
             d["not_found"] = det.reason  # nothing to decide: the plan goes on as it was
             return result, rest
@@ -178,6 +178,13 @@ def look_again_stage(
                 cause=new.cause or FailureCause.OTHER,
             )
         return new, new.plan
+
+
+def went_on_guessing(det: Detection) -> bool:
+    """True when ``det`` was ambiguous and nothing settled it (it went on with one of its rivals, provisionally);
+    a detection other views settled (a second camera, a wrist camera's look: ``details["resolved_by_view"]``)
+    is no guess."""
+    return bool(det.details.get("ambiguous")) and "resolved_by_view" not in det.details
 
 
 def _write_plan_again(run: Run, plan: Plan) -> None:
