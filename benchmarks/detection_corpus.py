@@ -158,6 +158,12 @@ def main() -> None:
     for r in wrong:
         note = " (flagged, truth listed)" if r["truth_in_alternatives"] else ""
         print(f"  {r['part']} scene {r['scene']}: {r['pos_mm']} mm, {r['rot_deg']} deg{note}")
+    same = [f"{r['part']} {r['scene']}" for r in rows if r["same_surface"]]
+    two_same = [f"{r['part']} {r['scene']}" for r in rows if r.get("two_same_surface")]
+    print(
+        f"right only by the same-surface rule (the surface within 0.5 mm of the truth's after a shift <= 5 mm): "
+        f"{len(same)} one view {same}" + (f", {len(two_same)} two views" if T_cam2 is not None else "")
+    )
     misses = {}
     for r in rows:
         if not r["found"]:

@@ -33,6 +33,7 @@ from asmteach.core.perception.registration import (
 )
 from asmteach.core.perception.viewpoint import StageClock
 from asmteach.core.symmetry import SymmetryFinder, axis_rotations, principal_frame
+from asmteach.core.symmetry.near import NearSymmetry
 from asmteach.plugins.detectors.cvfh.prescore import SampleIndex, near_shares, support_gap
 from asmteach.plugins.detectors.cvfh.resting import disagreement
 from asmteach.plugins.detectors.cvfh.settings import CvfhSettings
@@ -49,6 +50,7 @@ __all__ = [
     "rotation_sigma_deg",
     "verify_rounds",
     "view_hypotheses",
+    "weakest_turn",
 ]
 
 
@@ -75,6 +77,8 @@ class Prepared:
     """The part is thin enough to lie mostly below the table-removal height (``thin_height``)."""
     free: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     """(m, 3) part-frame axes of revolution (see :func:`free_axes`)."""
+    same: NearSymmetry | None = None
+    """Tells two poses that put the surface in the same place (``same_surface``; ``None``: listed symmetries only)."""
 
 
 @dataclass
@@ -199,7 +203,7 @@ def hull_twin_pass(
             continue
         verified += 1
         job.judged += [T, best.T_world_part]
-        if not is_distinct(T, [best.T_world_part], prep.own, s):
+        if not is_distinct(T, [best.T_world_part], prep.own, s, same=prep.same):
             continue  # ICP brought the twin back onto the pose (or a symmetric equivalent): nothing to choose
         ev = disagreement(best.T_world_part, T, job.cluster, job.eye, prep.model, s.twin_fit, s.twin_off)
         verdict = ev.verdict(s.twin_min_points, s.twin_ratio)
@@ -250,8 +254,8 @@ def near_twin_pass(
             continue
         T = job.icp(job.icp_in, prep.model, T0, s.refine)
         clock.lap("icp")
-        if not is_distinct(T, tried, prep.own, s):
-            continue  # ICP pulled it back onto a pose already tried
+        if not is_distinct(T, tried, prep.own, s, same=prep.same):
+            continue  # ICP pulled it back onto a pose already tried (or one with the same surface)
         v = verify(T, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
         clock.lap("verify")
         if v.accepted:
@@ -260,7 +264,7 @@ def near_twin_pass(
     winner = found[0]
     for v in found[1:]:
         if winner.score - v.score > s.ambiguity_margin or not is_distinct(
-            v.T_world_part, [winner.T_world_part], prep.own, s
+            v.T_world_part, [winner.T_world_part], prep.own, s, same=prep.same
         ):
             continue
         ev = disagreement(winner.T_world_part, v.T_world_part, job.cluster, job.eye, prep.model, s.near_fit, s.near_off)
@@ -280,15 +284,21 @@ def poses_apart(A: np.ndarray, B: np.ndarray, own: list[np.ndarray]) -> tuple[fl
 
 
 def is_distinct(
-    T: np.ndarray, others: list[np.ndarray], own: list[np.ndarray], s: CvfhSettings, scale: float = 1.0
+    T: np.ndarray,
+    others: list[np.ndarray],
+    own: list[np.ndarray],
+    s: CvfhSettings,
+    scale: float = 1.0,
+    same: NearSymmetry | None = None,
 ) -> bool:
     """Whether ``T`` is farther than ``scale * distinct_mm`` or turned more than ``scale * distinct_deg`` from
-    every other."""
+    every other (up to the part's listed symmetries ``own``), and, with ``same``, does not put the surface
+    where another puts it (:meth:`NearSymmetry.same`, a symmetry the list misses)."""
     for O in others:
         mm, deg = poses_apart(T, O, own)
         if mm <= scale * s.distinct_mm and deg <= scale * s.distinct_deg:
             return False
-    return True
+    return same is None or not any(same.same(T, O, s.distinct_mm) for O in others)
 
 
 def free_axes(mesh: trimesh.Trimesh, com: np.ndarray, tol: float) -> np.ndarray:
@@ -302,7 +312,17 @@ def free_axes(mesh: trimesh.Trimesh, com: np.ndarray, tol: float) -> np.ndarray:
 
 
 def rotation_sigma_deg(T_world_part: np.ndarray, job: ClusterJob, prep: Prepared, inlier: float) -> float:
-    """The largest standard deviation (deg) of the pose's rotation the seen points leave, any direction.
+    """The largest standard deviation (deg) of the pose's rotation the seen points leave, any direction
+    (:func:`weakest_turn`'s first value)."""
+    return weakest_turn(T_world_part, job, prep, inlier)[0]
+
+
+def weakest_turn(
+    T_world_part: np.ndarray, job: ClusterJob, prep: Prepared, inlier: float, free: np.ndarray | None = None
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """``(sigma_deg, axis, centre)``: the largest standard deviation (deg) of the pose's rotation the seen points
+    leave, the unit turn axis (world frame) it is about and the seen centroid (world, metres) it turns about.
+    ``free``: part-frame axes left out besides :attr:`Prepared.free` (a turn found to keep the surface).
 
     Linearised point-to-plane registration: each cluster point within ``inlier`` metres of the model at
     the pose constrains the motion along the model's normal at its nearest model point; its noise along
@@ -327,7 +347,7 @@ def rotation_sigma_deg(T_world_part: np.ndarray, job: ClusterJob, prep: Prepared
     q_local = near["points"].numpy().astype(float)
     ok = np.linalg.norm(q_local - local, axis=1) < inlier
     if ok.sum() < 10:
-        return float("inf")
+        return float("inf"), np.array([0.0, 0.0, 1.0]), cluster.mean(axis=0)
     R = T_world_part[:3, :3]
     q = geometry.transform_points(T_world_part, q_local[ok])
     n = near["primitive_normals"].numpy().astype(float)[ok] @ R.T
@@ -339,19 +359,29 @@ def rotation_sigma_deg(T_world_part: np.ndarray, job: ClusterJob, prep: Prepared
     var = (depth_sigma(rng) * cos) ** 2 + lateral**2 * (1.0 - cos**2)
     c = p.mean(axis=0)
     J = np.hstack([np.cross(q - c, n), n])  # d(residual) / d(turn, shift)
-    free = prep.free @ R.T if len(prep.free) else np.zeros((0, 3))
+    extra = np.zeros((0, 3)) if free is None else np.asarray(free, float).reshape(-1, 3)
+    free_w = _orthonormal(np.vstack([prep.free.reshape(-1, 3), extra]) @ R.T)
     # turns orthogonal to the free axes: an orthonormal basis of their complement
-    basis = np.linalg.svd(np.eye(3) - free.T @ free)[0][:, : 3 - len(free)] if len(free) else np.eye(3)
+    basis = np.linalg.svd(np.eye(3) - free_w.T @ free_w)[0][:, : 3 - len(free_w)] if len(free_w) else np.eye(3)
     if basis.shape[1] == 0:
-        return 0.0
+        return 0.0, np.array([0.0, 0.0, 1.0]), c
     Jr = np.hstack([J[:, :3] @ basis, J[:, 3:]])
     info = (Jr / var[:, None]).T @ Jr
     k = basis.shape[1]
     # The turn's information with the shift free: the Schur complement of the shift block (its pseudo-inverse: a
     # shift nothing pins, a tube seen from the side along its axis, leaves the turns alone).
     schur = info[:k, :k] - info[:k, k:] @ np.linalg.pinv(info[k:, k:]) @ info[k:, :k]
-    weakest = float(np.linalg.eigvalsh(schur).min())
-    if weakest <= 0.0:
-        return float("inf")
-    worst = 1.0 / weakest
-    return float(np.degrees(np.sqrt(max(worst, 0.0))))
+    values, vectors = np.linalg.eigh(schur)
+    axis = basis @ vectors[:, 0]
+    axis /= np.linalg.norm(axis)
+    if values[0] <= 0.0:
+        return float("inf"), axis, c
+    return float(np.degrees(np.sqrt(1.0 / values[0]))), axis, c
+
+
+def _orthonormal(rows: np.ndarray) -> np.ndarray:
+    """An orthonormal basis (rows) of the span of ``rows`` ((m, 3)): free axes need not be perpendicular."""
+    if not len(rows):
+        return rows
+    _, sv, vt = np.linalg.svd(rows, full_matrices=False)
+    return vt[sv > 1e-6 * sv.max()]

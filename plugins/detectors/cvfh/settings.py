@@ -89,6 +89,13 @@ class CvfhSettings(StrictModel):
     near_off: float = Field(0.006, gt=0.0, description="near twins: a pose clearly fails a point beyond this")
     distinct_mm: float = Field(5.0, gt=0.0, description="poses farther apart than this (mm) are distinct")
     distinct_deg: float = Field(5.0, gt=0.0, description="poses turned further apart than this (deg) are distinct")
+    same_surface: float = Field(
+        0.0005,
+        ge=0.0,
+        description="two poses that put the part's surface in the same place within this (metres, after a shift "
+        "of at most distinct_mm) are the same answer, whatever their turn: a tessellated torus or ball turned "
+        "by a symmetry the listed ones miss (asmteach.core.symmetry.near; 0: the listed symmetries only)",
+    )
     thin_height: float = Field(
         0.014,
         ge=0.0,

@@ -87,3 +87,18 @@ def test_an_axis_of_revolution_is_free_and_left_out_of_the_rotation_uncertainty(
     pinned = _sigma(tube, side, free)
     assert pinned < 1.0  # the other turns are pinned down ...
     assert _sigma(tube, side) > 5.0 * pinned  # ... the turn about its own axis is not (only the facets tell)
+
+
+def test_a_pose_putting_the_surface_where_another_does_is_not_distinct() -> None:
+    from asmteach.core.symmetry.near import NearSymmetry
+
+    # a 16-segment cylinder turned 20 deg about its axis: no listed symmetry (those are 22.5 deg apart), the same
+    # surface within 0.5 mm
+    cyl = trimesh.creation.cylinder(radius=0.02, height=0.03, sections=16)
+    B = geometry.from_rotation(np.eye(3), (0.45, 0.0, 0.1))
+    A = B @ geometry.from_rotvec(np.radians(20.0) * np.array([0.0, 0.0, 1.0]))
+    s = CvfhSettings()
+    assert is_distinct(A, [B], [np.eye(4)], s)
+    assert not is_distinct(A, [B], [np.eye(4)], s, same=NearSymmetry(cyl))
+    tilted = B @ geometry.from_rotvec(np.radians(20.0) * np.array([1.0, 0.0, 0.0]))
+    assert is_distinct(tilted, [B], [np.eye(4)], s, same=NearSymmetry(cyl))
