@@ -364,7 +364,7 @@ def guarded_insert(
     offset = np.zeros(3)
     pos, best_depth, tries, spiral_k = 0.0, 0.0, 0, 0
     search = PushSearch(s.search_step_m, s.search_radius_m)
-    turner = TorqueTurn(s.turn, progress_m=s.step_m)
+    turner = TorqueTurn(s.turn)
     steps = max(1, int(np.ceil(g.length / s.step_m)))
     while True:
         target = min(g.length, pos + g.length / steps)
@@ -384,7 +384,7 @@ def guarded_insert(
             out.inserted = True  # it met the seat (a blind hole's bottom, a stop) where the plan ends
             break
         out.contacts.append(InsertionContact(depth, force, slip, g.seconds, float(np.linalg.norm(offset))))
-        turn = turner.next(g.torque(), depth)
+        turn = turner.next(g.torque())
         tries += not turn
         if tries > s.max_tries:
             out.reason = f"still resisted after {s.max_tries} sideways corrections"
@@ -392,7 +392,7 @@ def guarded_insert(
         # back off (the hand's spring lets go of the part), then turn the hand or shift the line sideways
         pos = max(0.0, pos - s.backoff_m - slip)
         g.move_to(g.pose_at(pos, offset))
-        g.R_turn = turner.R  # a new turn to try, or the last one taken back (the sideways shift makes that move)
+        g.R_turn = turner.R
         if turn:  # yield to the contact's torque, as a compliant wrist would, and advance again
             if g.move_to(g.pose_at(pos, offset)):
                 g.settle_other()
