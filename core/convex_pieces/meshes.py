@@ -15,7 +15,7 @@ _CUT_OFFSET = 2e-7
 """Metres between a cutting plane and the face it is taken from (see :func:`split_convex`)."""
 
 
-def _to_manifold(mesh: trimesh.Trimesh) -> manifold3d.Manifold:
+def to_manifold(mesh: trimesh.Trimesh) -> manifold3d.Manifold:
     return manifold3d.Manifold(
         manifold3d.Mesh(
             vert_properties=np.asarray(mesh.vertices, dtype=np.float32),
@@ -82,7 +82,7 @@ def split_convex(mesh: trimesh.Trimesh, max_pieces: int = 128) -> tuple[list[tri
         area = np.bincount(inverse, weights=m.area_faces, minlength=len(planes))
         usable = np.zeros(len(planes), dtype=bool)
         usable[inverse[cuts]] = True
-        man, split = _to_manifold(m), None
+        man, split = to_manifold(m), None
         for best in np.argsort(-np.where(usable, area, -1.0))[: min(int(usable.sum()), _MAX_TRIES)]:
             # the plane's exact equation is its largest face's: the rounded key (1 um) only groups faces
             members = np.flatnonzero(inverse == best)

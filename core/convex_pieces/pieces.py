@@ -22,6 +22,9 @@ class DecompositionSettings:
     """Lower bound of CoACD's normalised concavity threshold (smaller ones take minutes per part)."""
     coacd_resolution: int = 2000
     """CoACD's surface samples per concavity evaluation."""
+    refine_max_pieces: int = 128
+    """Most pieces CoACD's result may grow to when its protruding pieces are cut again
+    (:mod:`asmteach.core.convex_pieces.refine`)."""
     seed: int = 0
     """Seed of CoACD's tree search and of the fidelity samples."""
     samples: int = 20000

@@ -14,13 +14,14 @@ import numpy as np
 from asmteach.core.convex_pieces.measure import fidelity
 from asmteach.core.convex_pieces.meshes import coacd_pieces, split_convex
 from asmteach.core.convex_pieces.pieces import ConvexDecomposition, DecompositionSettings, hull_corners
+from asmteach.core.convex_pieces.refine import refine_protruding
 from asmteach.core.convex_pieces.solids import solid_pieces
 from asmteach.core.interfaces import PartModel
 from asmteach.core.io import atomic_path, cache_root
 
 log = logging.getLogger(__name__)
 
-CACHE_VERSION = 2
+CACHE_VERSION = 3
 """Bump when a change to the code changes the pieces it makes (old cache files are then ignored)."""
 
 
@@ -146,6 +147,9 @@ def _build(part: PartModel, s: DecompositionSettings) -> ConvexDecomposition:
     if max(split_fig[1], split_fig[3]) <= s.tolerance:
         return done(split_v, "plane_split", split_fig)
     co = coacd_pieces(mesh, s)
+    if co:
+        # CoACD's pieces bridge concavities within its normalised threshold: cut those that protrude again
+        co = refine_protruding(co, mesh, s.tolerance, max(s.refine_max_pieces, len(co)), s.seed)
     co_fig = fidelity(co, mesh, s.samples, s.seed) if co else (np.inf, np.inf, np.inf, np.inf)
     log.info(
         "%s: plane split left %d hulls (protrusion %.3g mm), CoACD protrusion %.3g mm",
