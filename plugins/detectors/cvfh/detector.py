@@ -43,7 +43,7 @@ Pipeline (paper, "Rough detection using point cloud"), all in the world frame
    (``details["ambiguous_kind"] = "near_twin"``);
 7. the winner's rotation uncertainty is estimated from the seen points (linearised point-to-plane
    registration with the Kinect's noise, turns about an axis of revolution left out:
-   :func:`~asmteach.plugins.detectors.cvfh.pose_search.rotation_sigma_deg`); when ``pin_sigmas`` times it
+   :func:`~asmteach.plugins.detectors.cvfh.pinning.rotation_sigma_deg`); when ``pin_sigmas`` times it
    exceeds ``distinct_deg``, the view does not pin the pose down to the tolerance and it is not reported
    (``details["rotation_sigma_deg"]``).
 
@@ -71,16 +71,15 @@ from asmteach.core.perception.segmentation import check_cloud, cluster_objects, 
 from asmteach.core.perception.viewpoint import StageClock, resolve_viewpoint
 from asmteach.core.symmetry import part_symmetries
 from asmteach.core.symmetry.near import NearSymmetry
+from asmteach.plugins.detectors.cvfh.pinning import free_axes, pin_rivals
 from asmteach.plugins.detectors.cvfh.pose_search import (
     ClusterJob,
     Prepared,
-    free_axes,
     hull_twin_pass,
     near_twin_pass,
     poses_apart,
     verify_rounds,
     view_hypotheses,
-    weakest_turn,
 )
 from asmteach.plugins.detectors.cvfh.prescore import SampleIndex, near_shares, support_gap
 from asmteach.plugins.detectors.cvfh.resting import hull_twins, near_twins, resting_hypotheses, stable_rests
@@ -347,7 +346,7 @@ class CvfhIcpDetector(Detector):
                 info["ambiguous_kind"] = "near_twin"
                 return _Outcome(None, replace(best, accepted=False, why=why), info, job.icp_passes)
         if best is not None and s.pin_sigmas > 0:
-            sigma, rivals = _pin(best.T_world_part, job, prep, s)
+            sigma, rivals = pin_rivals(best.T_world_part, job, prep, s)
             info["rotation_sigma_deg"] = round(sigma, 3)
             if rivals:
                 # The seen points leave the pose free to turn by the tolerance: reporting it would be a guess.
@@ -361,42 +360,6 @@ class CvfhIcpDetector(Detector):
                 return _Outcome(None, replace(best, accepted=False, why=why), info, job.icp_passes)
         info = {**info, "hypotheses": len(hyps), "cluster_points": len(cluster)}
         return _Outcome(best, closest, info, job.icp_passes)
-
-
-def _pin(T: np.ndarray, job: ClusterJob, prep: Prepared, s: CvfhSettings) -> tuple[float, list[np.ndarray]]:
-    """``(sigma_deg, rivals)``: the pose's rotation uncertainty in its weakest direction, and, when ``pin_sigmas``
-    times it exceeds ``distinct_deg``, ``T`` turned that many sigmas both ways about that direction (through
-    the seen centroid; world frame, metres); no rivals when the view pins the pose down.
-
-    A weakest direction about which every turn, all round, keeps the part's surface in place (``prep.same``:
-    an axis of revolution the listed symmetries miss) is no uncertainty of the answer: it is left out, as
-    :func:`free_axes` are, and the next weakest direction judged. All round, not only within the sigmas: along
-    such a direction ICP's objective is flat but for the facets, the linearised sigma says nothing about where
-    the truth is, and the corpus torus, found 11.9 deg about its axis from the truth, is 0.52 mm off there.
-    """
-    free = np.zeros((0, 3))
-    for _ in range(3):
-        sigma, axis, centre = weakest_turn(T, job, prep, s.refine.inlier_distance, free)
-        if s.pin_sigmas * sigma <= s.distinct_deg:
-            return sigma, []
-        turn = min(s.pin_sigmas * sigma, 90.0)  # an unpinned turn of a sphere-like part: 90 deg shows it
-        rivals = [_turned(T, axis, centre, a) for a in (turn, -turn)]
-        if prep.same is None or not all(
-            prep.same.same(T, _turned(T, axis, centre, a), s.distinct_mm) for a in (turn, -turn, *_ALL_ROUND)
-        ):
-            return sigma, rivals
-        free = np.vstack([free, T[:3, :3].T @ axis])  # every turn keeps the surface: a symmetry, part frame
-    return sigma, rivals
-
-
-_ALL_ROUND = tuple(range(3, 360, 3))
-"""Turns (deg) that must all keep the surface for a direction to be left out of the pin check."""
-
-
-def _turned(T: np.ndarray, axis: np.ndarray, centre: np.ndarray, deg: float) -> np.ndarray:
-    """``T`` turned by ``deg`` about the world ``axis`` through ``centre`` (metres)."""
-    R = geometry.from_rotvec(np.radians(deg) * axis)[:3, :3]
-    return geometry.from_rotation(R, centre - R @ centre) @ T
 
 
 def _width(points: np.ndarray) -> float:

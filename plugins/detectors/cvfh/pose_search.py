@@ -10,8 +10,8 @@ in order:
 * :func:`hull_twin_pass`: the verified pose turned by each hull twin, the ray evidence choosing;
 * :func:`near_twin_pass`: the pose turned by each near twin and nudge, and the distinct rival that
   scores as well, if any (the view cannot tell them apart);
-* :func:`rotation_sigma_deg`: how well the seen points pin the winner's rotation down (turns about an axis
-  of revolution, :func:`free_axes`, left out).
+
+and then :mod:`~asmteach.plugins.detectors.cvfh.pinning` judges how well the seen points pin the winner down.
 """
 
 from __future__ import annotations
@@ -19,10 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import trimesh
 
-from asmteach.core import geometry
-from asmteach.core.clouds import depth_sigma
 from asmteach.core.models import TablePlane
 from asmteach.core.perception.registration import (
     ModelCloud,
@@ -32,7 +29,6 @@ from asmteach.core.perception.registration import (
     verify,
 )
 from asmteach.core.perception.viewpoint import StageClock
-from asmteach.core.symmetry import SymmetryFinder, axis_rotations, principal_frame
 from asmteach.core.symmetry.near import NearSymmetry
 from asmteach.plugins.detectors.cvfh.prescore import SampleIndex, near_shares, support_gap
 from asmteach.plugins.detectors.cvfh.resting import disagreement
@@ -42,15 +38,12 @@ from asmteach.plugins.detectors.cvfh.views import CloudDescription, ViewDatabase
 __all__ = [
     "ClusterJob",
     "Prepared",
-    "free_axes",
     "hull_twin_pass",
     "is_distinct",
     "near_twin_pass",
     "poses_apart",
-    "rotation_sigma_deg",
     "verify_rounds",
     "view_hypotheses",
-    "weakest_turn",
 ]
 
 
@@ -76,7 +69,7 @@ class Prepared:
     thin: bool = False
     """The part is thin enough to lie mostly below the table-removal height (``thin_height``)."""
     free: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-    """(m, 3) part-frame axes of revolution (see :func:`free_axes`)."""
+    """(m, 3) part-frame axes of revolution (see :func:`~asmteach.plugins.detectors.cvfh.pinning.free_axes`)."""
     same: NearSymmetry | None = None
     """Tells two poses that put the surface in the same place (``same_surface``; ``None``: listed symmetries only)."""
 
@@ -299,89 +292,3 @@ def is_distinct(
         if mm <= scale * s.distinct_mm and deg <= scale * s.distinct_deg:
             return False
     return same is None or not any(same.same(T, O, s.distinct_mm) for O in others)
-
-
-def free_axes(mesh: trimesh.Trimesh, com: np.ndarray, tol: float) -> np.ndarray:
-    """``(m, 3)`` principal axes (part frame, unit) the part turns about freely: an axis of revolution (turns of
-    7 and 31 deg map its surface onto itself within ``tol`` metres, as :func:`asmteach.core.symmetry.
-    equivalent_transforms` tests it). A turn about one gives the same pose, so the view need not pin it."""
-    com = np.asarray(com, float)
-    finder = SymmetryFinder(mesh, np.asarray(mesh.convex_hull.vertices), com, tol=tol, corners=False)
-    axes = [a for a in principal_frame(mesh).T if all(finder.maps(R) for R in axis_rotations(a, np.radians([7, 31])))]
-    return np.asarray(axes, float).reshape(-1, 3)
-
-
-def rotation_sigma_deg(T_world_part: np.ndarray, job: ClusterJob, prep: Prepared, inlier: float) -> float:
-    """The largest standard deviation (deg) of the pose's rotation the seen points leave, any direction
-    (:func:`weakest_turn`'s first value)."""
-    return weakest_turn(T_world_part, job, prep, inlier)[0]
-
-
-def weakest_turn(
-    T_world_part: np.ndarray, job: ClusterJob, prep: Prepared, inlier: float, free: np.ndarray | None = None
-) -> tuple[float, np.ndarray, np.ndarray]:
-    """``(sigma_deg, axis, centre)``: the largest standard deviation (deg) of the pose's rotation the seen points
-    leave, the unit turn axis (world frame) it is about and the seen centroid (world, metres) it turns about.
-    ``free``: part-frame axes left out besides :attr:`Prepared.free` (a turn found to keep the surface).
-
-    Linearised point-to-plane registration: each cluster point within ``inlier`` metres of the model at
-    the pose constrains the motion along the model's normal at its nearest model point; its noise along
-    that normal is the Kinect's depth noise along the camera ray (:func:`asmteach.core.clouds.depth_sigma`)
-    and a 0.5-pixel lateral jitter across it. The information matrix of the 6 pose parameters (turn about
-    the seen centroid, shift) gives the covariance; the turn block's largest eigenvalue, with the
-    translation free (a shift may make up for part of a turn) and turns about an axis of revolution left
-    out (:func:`free_axes`), is the weakest direction's variance.
-
-    The points are the voxel-reduced cluster ICP registers (``job.icp_in``, one per 3 mm voxel), not every
-    pixel: a Kinect's neighbouring pixels share their error (its correlation window, the lateral blur), and
-    counting each as independent information claimed more than the view holds: ``ff_duck`` scene 1 had 1.49 deg
-    from its 272 pixels (3 sigma within 5 deg) and was found 6.5 deg off, the noise pulling ICP from the true
-    pose as far; its 189 voxels give 1.82 deg.
-    """
-    cluster, eye = job.icp_in, np.asarray(job.eye, float)
-    T_pw = geometry.invert(T_world_part)
-    local = geometry.transform_points(T_pw, cluster)
-    import open3d as o3d
-
-    near = prep.model.scene.compute_closest_points(o3d.core.Tensor(local.astype(np.float32)))
-    q_local = near["points"].numpy().astype(float)
-    ok = np.linalg.norm(q_local - local, axis=1) < inlier
-    if ok.sum() < 10:
-        return float("inf"), np.array([0.0, 0.0, 1.0]), cluster.mean(axis=0)
-    R = T_world_part[:3, :3]
-    q = geometry.transform_points(T_world_part, q_local[ok])
-    n = near["primitive_normals"].numpy().astype(float)[ok] @ R.T
-    p = cluster[ok]
-    ray = p - eye
-    rng = np.linalg.norm(ray, axis=1)
-    cos = np.abs(np.einsum("ij,ij->i", n, ray / rng[:, None]))
-    lateral = rng * 0.5 / 525.0  # 0.5 px of a Kinect v1's 525 px focal length, metres
-    var = (depth_sigma(rng) * cos) ** 2 + lateral**2 * (1.0 - cos**2)
-    c = p.mean(axis=0)
-    J = np.hstack([np.cross(q - c, n), n])  # d(residual) / d(turn, shift)
-    extra = np.zeros((0, 3)) if free is None else np.asarray(free, float).reshape(-1, 3)
-    free_w = _orthonormal(np.vstack([prep.free.reshape(-1, 3), extra]) @ R.T)
-    # turns orthogonal to the free axes: an orthonormal basis of their complement
-    basis = np.linalg.svd(np.eye(3) - free_w.T @ free_w)[0][:, : 3 - len(free_w)] if len(free_w) else np.eye(3)
-    if basis.shape[1] == 0:
-        return 0.0, np.array([0.0, 0.0, 1.0]), c
-    Jr = np.hstack([J[:, :3] @ basis, J[:, 3:]])
-    info = (Jr / var[:, None]).T @ Jr
-    k = basis.shape[1]
-    # The turn's information with the shift free: the Schur complement of the shift block (its pseudo-inverse: a
-    # shift nothing pins, a tube seen from the side along its axis, leaves the turns alone).
-    schur = info[:k, :k] - info[:k, k:] @ np.linalg.pinv(info[k:, k:]) @ info[k:, :k]
-    values, vectors = np.linalg.eigh(schur)
-    axis = basis @ vectors[:, 0]
-    axis /= np.linalg.norm(axis)
-    if values[0] <= 0.0:
-        return float("inf"), axis, c
-    return float(np.degrees(np.sqrt(1.0 / values[0]))), axis, c
-
-
-def _orthonormal(rows: np.ndarray) -> np.ndarray:
-    """An orthonormal basis (rows) of the span of ``rows`` ((m, 3)): free axes need not be perpendicular."""
-    if not len(rows):
-        return rows
-    _, sv, vt = np.linalg.svd(rows, full_matrices=False)
-    return vt[sv > 1e-6 * sv.max()]
