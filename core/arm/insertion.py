@@ -384,7 +384,10 @@ def guarded_insert(
             out.inserted = True  # it met the seat (a blind hole's bottom, a stop) where the plan ends
             break
         out.contacts.append(InsertionContact(depth, force, slip, g.seconds, float(np.linalg.norm(offset))))
-        turn = turner.next(g.torque())
+        # a tilt, not a lateral miss, once shifts meet the resistance at one depth: turn from then on
+        last = [c.depth_m for c in out.contacts[-(s.turn.after_shifts + 1) :]]
+        tilted = len(last) > s.turn.after_shifts and max(last) - min(last) <= s.turn.same_depth_m
+        turn = turner.next(g.torque()) if turner.tried or tilted else False
         tries += not turn
         if tries > s.max_tries:
             out.reason = f"still resisted after {s.max_tries} sideways corrections"
@@ -394,6 +397,8 @@ def guarded_insert(
         g.move_to(g.pose_at(pos, offset))
         g.R_turn = turner.R
         if turn:  # yield to the contact's torque, as a compliant wrist would, and advance again
+            if turner.tried == 1 and search.origin is not None:
+                offset = search.origin.copy()  # the shifts changed nothing: back to where they began
             if g.move_to(g.pose_at(pos, offset)):
                 g.settle_other()
                 continue

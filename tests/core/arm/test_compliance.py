@@ -182,3 +182,12 @@ def test_a_slider_held_off_its_grooves_axis_goes_in_only_when_the_hand_turns_wit
     stuck, stuck_off = _slide(turn=False, tilt_deg=tilt_deg)
     assert not stuck.inserted and not stuck.turns_deg and "sideways" in stuck.reason
     assert stuck.depth_m < 0.035 and stuck_off > 2.0
+
+
+def test_a_slider_whose_front_lands_beside_the_mouth_is_shifted_not_turned() -> None:
+    """Held 1.5 deg off about the TCP, the slider's front lands on the block's end face beside the groove: the
+    torque there turns it the wrong way (turning at once: jammed at 30 mm, 3.4 deg off, measured while writing
+    this). A shift changes the depth it stops at, so no turn is tried, and it goes in as it did without."""
+    out, off = _slide(turn=True, tilt_deg=1.5, pivot="tcp")
+    assert out.inserted and not out.turns_deg and len(out.contacts) >= 2
+    assert off < 1.2
