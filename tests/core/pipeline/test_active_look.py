@@ -194,3 +194,29 @@ def test_the_heightmap_fills_under_what_was_seen() -> None:
     mesh = seen_heightmap([DepthView(pts, None)], TablePlane(), skip=[(np.array([0.3, 0.0, 0.04]), 0.02)])
     assert mesh is not None
     assert np.allclose(mesh.bounds, [[0.40, 0.0, 0.0], [0.41, 0.01, 0.05]])  # one column to the highest point
+
+
+def test_the_runs_look_records_and_counts_robot_seconds(case) -> None:
+    from types import SimpleNamespace
+
+    from asmteach.core.pipeline.active_look import closer_for
+
+    part, T_true, rival, first = case
+    robot = _FlyingCamera(part.mesh, T_true)
+    syms = part_symmetries(part.mesh, part.center_of_mass)
+    run = SimpleNamespace(
+        execution=SimpleNamespace(look_closer=2, depth_frames=4),
+        plugin=lambda role: _Straight(),
+        symmetries=lambda p: syms,
+        report=SimpleNamespace(robot_seconds={"total": 1.0}),
+    )
+    details: dict = {}
+    look = closer_for(run, robot, part, [first], TablePlane(), details)
+    assert look is not None
+    det = look(_ambiguous(part, [rival, T_true]))
+    assert det.found and details["looks"]["d_peg"][-1]["made"]
+    seconds = sum(t.times[-1] for t in robot.executed)
+    assert run.report.robot_seconds["look"] == pytest.approx(seconds, abs=1e-3)
+    assert run.report.robot_seconds["total"] == pytest.approx(1.0 + seconds, abs=1e-3)
+    run.execution.look_closer = 0  # switched off: no look at all
+    assert closer_for(run, robot, part, [first], TablePlane(), details) is None
