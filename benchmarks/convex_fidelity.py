@@ -3,9 +3,9 @@
 For every part of :func:`asmteach.core.corpus.part_corpus` (seed ``--seed``), taken as a mesh part (the
 mesh route of :func:`asmteach.core.convex_pieces.decompose`, no parametric solid), prints the route taken
 (``convex``, ``plane_split`` or ``coacd``), the piece count, the two-sided Hausdorff distance between
-the pieces' union and the mesh (mm; it counts gaps between pieces inside the material too), the largest
-protrusion of a piece outside the mesh (mm; what closes a clearance), the largest distance of the mesh
-surface from the pieces (mm, "uncov"), the union's volume error (%) and the time (s). The cache is off,
+the pieces' union and the mesh as solids (mm; the larger of the next two), the largest protrusion of a
+piece outside the mesh (mm; what closes a clearance), the largest distance of the mesh, surface and inside,
+from the pieces (mm, "uncov"; where a body would pass through), the union's volume error (%) and the time (s). The cache is off,
 so every part is built. The CSV goes to ``benchmarks/out/convex_fidelity.csv``; the last lines give
 the median and max per route.
 

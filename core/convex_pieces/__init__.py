@@ -33,15 +33,20 @@ picks the first route that applies to a :class:`PartModel`:
     fixed seed; its concavity threshold is derived from ``tolerance`` and the
     part's size (CoACD works on the mesh normalised to its bounding box),
     bounded below by ``min_coacd_threshold`` to keep its run time in seconds.
+    Its pieces that still protrude past ``tolerance`` are then cut again
+    where they bridge a concavity (:mod:`.refine`), up to
+    ``refine_max_pieces`` pieces.
     When the plane split, hulls and all, is closer to the mesh than CoACD's
     result (larger of protrusion and uncovered distance), it is kept.
 
-Every result carries its measured fidelity (:func:`fidelity`): the two-sided
-Hausdorff distance between the union of pieces and the mesh, the largest
-protrusion of the pieces outside the mesh (what closes a clearance), the
-largest distance of the mesh surface from the pieces, and the union's volume
-error, by seeded surface sampling (trimesh's exact closest-point queries,
-Open3D ray casting for inside/outside, vectorised).
+Every result carries its measured fidelity (:func:`fidelity`), both ways:
+the largest protrusion of the pieces outside the mesh (what closes a
+clearance), the largest distance of the mesh (its surface and its inside)
+from the pieces (``uncovered``: where a body would pass through the part),
+the two-sided Hausdorff distance between the two solids (the larger of the
+two) and the union's volume error, by seeded sampling (Open3D's nearest
+triangle with an exact float64 point-triangle distance, Open3D ray casting
+for inside/outside, vectorised).
 
 Decompositions are cached on disk under ``convex_pieces`` in
 :func:`asmteach.core.io.cache_root`, keyed by the mesh hash (and the solid
@@ -55,7 +60,8 @@ mesh-exact contact already. Only physics simulation needs convex pieces.
 Units: metres, part frame.
 The package: :mod:`.pieces` (settings, the result, hulls and OBJ text), :mod:`.solids` (the exact
 route of parametric solids), :mod:`.meshes` (the plane split and CoACD), :mod:`.measure` (fidelity) and
-:mod:`.route` (:func:`decompose`: the route taken, cached on disk and in memory).
+:mod:`.refine` (cutting protruding pieces again) and :mod:`.route` (:func:`decompose`: the route taken, cached on
+disk and in memory).
 """
 
 from __future__ import annotations
