@@ -141,3 +141,49 @@ def test_a_closer_look_comes_before_going_on_provisionally(part: PartModel) -> N
     T = np.eye(4)
     detect_and_correct(_Found(T), None, _cloud(part, T), part, closer=settles)
     assert len(asked) == 1
+
+
+class _TurnsOnTheSegment(Corrector):
+    """Snaps (lifts 1 mm) without a cloud; with one, its refinement turns the part 26 deg about z, as a planar ICP on
+    a view that cannot tell the turns apart may."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.clouds: list[np.ndarray | None] = []
+
+    def correct(
+        self,
+        T_world_part: np.ndarray,
+        part: PartModel,
+        table: TablePlane,
+        cloud: np.ndarray | None = None,
+        viewpoint: np.ndarray | None = None,
+    ) -> Correction:
+        self.clouds.append(cloud)
+        lift = geometry.from_rotation(np.eye(3), (0, 0, 0.001)) @ T_world_part
+        turn = geometry.from_rpy(0.0, 0.0, np.radians(26.0)) if cloud is not None else np.eye(4)
+        return Correction(T_world_part=lift @ turn, placement_id=1)
+
+
+def test_a_correction_may_not_undo_what_other_views_settled(part: PartModel) -> None:
+    T = np.eye(4)
+
+    def settles(det: Detection) -> Detection:
+        rival = np.asarray(det.details["ambiguous"][1]["T_world_part"])
+        return det.model_copy(
+            update={"found": True, "reason": None, "rough": rival, "details": {**det.details, "resolved_by_view": {}}}
+        )
+
+    corrector = _TurnsOnTheSegment()
+    det = detect_and_correct(
+        _Ambiguous(), corrector, _cloud(part, T), part, TablePlane(), closer=settles, symmetries=[]
+    )
+    settled = np.asarray(_ambiguous("hull_twin").details["ambiguous"][1]["T_world_part"])
+    assert corrector.clouds[0] is not None and corrector.clouds[1] is None  # refined, then the snap alone
+    assert np.allclose(det.corrected, geometry.from_rotation(np.eye(3), (0, 0, 0.001)) @ settled)
+    over = det.details["correction_overruled"]
+    assert over["refined_vs_settled"]["angle_deg"] > 25.0 and over["snap_vs_settled"]["angle_deg"] < 1e-6
+    # a detection no other view settled keeps the corrector's refinement, turn and all
+    plain = detect_and_correct(_Found(T), _TurnsOnTheSegment(), _cloud(part, T), part, TablePlane())
+    assert "correction_overruled" not in plain.details
+    assert np.degrees(geometry.rotation_distance(plain.corrected, T)) > 25.0
