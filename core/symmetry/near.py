@@ -3,8 +3,8 @@
 :func:`~asmteach.core.symmetry.part_symmetries` lists the rotations that map a part onto itself within
 0.5 mm, from a finite set of candidates (cube group, cyclic groups about principal axes, their flips).
 A tessellated torus or ball has symmetries that are only approximate and nearly continuous: the torus
-of the corpus maps onto itself within 0.45-0.50 mm after any turn about its axis, and a 1002-face mesh
-gives no candidate list that holds them all. A detector then sees two poses whose surfaces coincide and
+of the corpus maps onto itself within 0.53 mm after any turn about its axis, and a 1002-face mesh gives
+no candidate list that holds them all. A detector then sees two poses whose surfaces coincide and
 calls them rivals; a benchmark calls one of them 12 deg off.
 
 :class:`NearSymmetry` answers the question for one pair of poses instead of listing the group: the offset
@@ -14,9 +14,10 @@ samples), its translation refit first (the two poses carry their own registratio
 tolerance allows 5 mm). ``A`` is then the same answer as ``B`` (:meth:`NearSymmetry.same`): the two put
 the part's surface in the same place within ``tol``, the rule ``part_symmetries`` applies to its listed
 rotations, found where it is needed. The turn between them may be any: the corpus torus turned 8 or 20 deg
-about its axis is the same answer (0.48 / 0.21 mm), turned 12 deg it is not (0.52 mm: its 16 segments sag
-0.54 mm), nor is a hex peg turned 8 deg (1.1 mm). A point-to-plane ICP of the surface onto itself is no way
-to find a nearer symmetry: the facets' exact symmetries pull it 8-12 deg away.
+about its axis is the same answer (0.48 / 0.21 mm), turned 12 deg it is not (0.52 mm: halfway between two
+of its 16 exact turns it is 0.53 mm off), nor is a hex peg turned 8 deg (1.1 mm). A point-to-plane ICP of
+the surface onto itself is no way to find a nearer symmetry: the facets' exact symmetries pull it 8-12 deg
+away.
 
 Units: metres, radians (``apart`` returns mm); frames: the part frame.
 """
