@@ -39,10 +39,10 @@ class TurnSettings:
     """
 
     gain_rad_per_nm: float = 0.15
-    step_max_deg: float = 1.0
+    step_max_deg: float = 0.5
     total_max_deg: float = 3.0
     min_torque_nm: float = 0.02
-    max_turns: int = 6
+    max_turns: int = 10
     after_shifts: int = 2
     same_depth_m: float = 0.001
     enabled: bool = True
