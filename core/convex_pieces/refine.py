@@ -27,7 +27,7 @@ import manifold3d
 import numpy as np
 import trimesh
 
-from asmteach.core.convex_pieces.measure import distance_to
+from asmteach.core.convex_pieces.measure import triangle_distance
 from asmteach.core.convex_pieces.meshes import to_manifold
 from asmteach.core.convex_pieces.pieces import hull_corners, piece_hull
 
@@ -45,13 +45,13 @@ _MAX_CUTS = 10
 
 
 class _MeshQuery:
-    """Distance outside a closed mesh (0 inside; Open3D ray casting, trimesh's exact distance; metres)."""
+    """Distance outside a closed mesh, 0 inside (Open3D ray casting and nearest triangle, float64 distance; m)."""
 
     def __init__(self, mesh: trimesh.Trimesh) -> None:
         import open3d as o3d
 
         self._o3d = o3d
-        self.mesh = mesh
+        self.triangles = np.asarray(mesh.triangles, dtype=float)
         self.scene = o3d.t.geometry.RaycastingScene()
         self.scene.add_triangles(
             o3d.core.Tensor(np.asarray(mesh.vertices, dtype=np.float32)),
@@ -62,9 +62,13 @@ class _MeshQuery:
         t = self._o3d.core.Tensor(np.asarray(pts, dtype=np.float32))
         out = self.scene.compute_occupancy(t).numpy() < 0.5
         dist = np.zeros(len(pts))
-        # Open3D's distances are off by tens of micrometres on long thin triangles (CAD hole walls): the
-        # few points outside get trimesh's exact ones, as the measure does
-        dist[out] = distance_to(self.mesh, np.asarray(pts)[out])
+        if out.any():
+            # the nearest triangle from Open3D, the distance to it in float64 (as the measure does)
+            p = np.asarray(pts, dtype=float)[out]
+            ans = self.scene.compute_closest_points(self._o3d.core.Tensor(p.astype(np.float32)))
+            face = ans["primitive_ids"].numpy().astype(np.int64)
+            tri = self.triangles[face]
+            dist[out] = triangle_distance(p, tri[:, 0], tri[:, 1], tri[:, 2])
         return dist
 
     def closest(self, p: np.ndarray) -> tuple[np.ndarray, int]:
