@@ -24,7 +24,7 @@ class DecompositionSettings:
     """CoACD's surface samples per concavity evaluation."""
     refine_max_pieces: int = 128
     """Most pieces CoACD's result may grow to when its protruding pieces are cut again
-    (:mod:`asmteach.core.convex_pieces.refine`)."""
+    (:mod:`asmteach.core.convex_pieces.refine`), or twice CoACD's count when that is more."""
     seed: int = 0
     """Seed of CoACD's tree search and of the fidelity samples."""
     samples: int = 20000

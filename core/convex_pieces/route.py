@@ -21,7 +21,7 @@ from asmteach.core.io import atomic_path, cache_root
 
 log = logging.getLogger(__name__)
 
-CACHE_VERSION = 3
+CACHE_VERSION = 4
 """Bump when a change to the code changes the pieces it makes (old cache files are then ignored)."""
 
 
@@ -149,7 +149,7 @@ def _build(part: PartModel, s: DecompositionSettings) -> ConvexDecomposition:
     co = coacd_pieces(mesh, s)
     if co:
         # CoACD's pieces bridge concavities within its normalised threshold: cut those that protrude again
-        co = refine_protruding(co, mesh, s.tolerance, max(s.refine_max_pieces, len(co)), s.seed)
+        co = refine_protruding(co, mesh, s.tolerance, max(s.refine_max_pieces, 2 * len(co)), s.seed)
     co_fig = fidelity(co, mesh, s.samples, s.seed) if co else (np.inf, np.inf, np.inf, np.inf)
     log.info(
         "%s: plane split left %d hulls (protrusion %.3g mm), CoACD protrusion %.3g mm",
