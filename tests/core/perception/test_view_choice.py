@@ -55,7 +55,8 @@ def test_the_side_that_shows_the_flat_ranks_first() -> None:
     mesh = _d_peg()
     T_true, T_rival = _poses(mesh)
     syms = part_symmetries(mesh, np.asarray(mesh.center_mass))
-    ranked = rank_viewpoints(mesh, [T_rival, T_true], CLOSE, TablePlane(), symmetries=syms)
+    grid = ViewChoiceSettings(distances=[0.2, 0.275, 0.35], elevations_deg=[35.0, 55.0, 75.0])
+    ranked = rank_viewpoints(mesh, [T_rival, T_true], CLOSE, TablePlane(), symmetries=syms, settings=grid)
     assert len(ranked) == 3 * 3 * 12
     seps = [v.separation for v in ranked]
     assert seps == sorted(seps, reverse=True)
@@ -65,7 +66,7 @@ def test_the_side_that_shows_the_flat_ranks_first() -> None:
     assert best.separation > 10.0 * worst.separation
     assert best.as_details()["predicted_separation"] == round(best.separation, 1)
     # a second frame doubles the evidence
-    twice = rank_viewpoints(mesh, [T_rival, T_true], CLOSE, TablePlane(), symmetries=syms, frames=2)
+    twice = rank_viewpoints(mesh, [T_rival, T_true], CLOSE, TablePlane(), symmetries=syms, frames=2, settings=grid)
     assert np.isclose(twice[0].separation, 2.0 * best.separation)
 
 
@@ -74,8 +75,9 @@ def test_an_occluder_on_the_flat_side_hides_it() -> None:
     T_true, T_rival = _poses(mesh)
     wall = trimesh.creation.box(extents=[0.01, 0.3, 0.3])
     T_wall = geometry.from_rotation(np.eye(3), [0.49, 0.0, 0.15])
-    free = rank_viewpoints(mesh, [T_rival, T_true], CLOSE, TablePlane())
-    hidden = rank_viewpoints(mesh, [T_rival, T_true], CLOSE, TablePlane(), occluders=[(wall, T_wall)])
+    side = ViewChoiceSettings(distances=[0.2, 0.275, 0.35], elevations_deg=[35.0, 55.0])  # no view from above
+    free = rank_viewpoints(mesh, [T_rival, T_true], CLOSE, TablePlane(), settings=side)
+    hidden = rank_viewpoints(mesh, [T_rival, T_true], CLOSE, TablePlane(), occluders=[(wall, T_wall)], settings=side)
     assert free[0].T_world_cam[0, 3] > 0.45 and hidden[0].T_world_cam[0, 3] < 0.5
     assert hidden[0].separation < free[0].separation
 
