@@ -33,9 +33,9 @@ class TurnSettings:
     ``gain_rad_per_nm``: turn per newton-metre of contact torque about the compliance centre; ``step_max_deg``
     and ``total_max_deg``: the most one turn and all turns together rotate the hand; ``min_torque_nm``: a smaller
     torque says nothing (a part pressing square on a stop); ``max_turns``: turns before only the sideways
-    search goes on; ``after_shifts``: turns begin once this many sideways shifts in a row met the resistance
-    within ``same_depth_m`` of one depth (no lateral miss: a tilt); ``enabled``: False runs the guarded
-    insertion without turns (as before Session 16).
+    search goes on; ``after_shifts``: turns begin once this many sideways shifts met resistance (the search
+    had its chance at a lateral miss); ``enabled``: False runs the guarded insertion without turns (as before
+    Session 16).
     """
 
     gain_rad_per_nm: float = 0.15
@@ -43,8 +43,7 @@ class TurnSettings:
     total_max_deg: float = 3.0
     min_torque_nm: float = 0.02
     max_turns: int = 10
-    after_shifts: int = 2
-    same_depth_m: float = 0.001
+    after_shifts: int = 5
     enabled: bool = True
 
 
@@ -85,10 +84,12 @@ class TorqueTurn:
     sideways shift; :meth:`unreached` takes back a turn the arm cannot make. ``R`` is the hand's total turn
     (3x3, world); ``steps_deg`` lists the turns standing.
 
-    The guard turns only once sideways shifts in a row met the resistance at one depth
-    (:attr:`TurnSettings.after_shifts`): a front resting on the guide's rim beside the mouth feels a torque that
-    turns it the wrong way (turning first, gen_t_slot_slide_s0_0 seed 8, in after one shift without turns,
-    jammed at 23.6 of 50 mm 2.7 deg turned; a floating-hand slider held 1.5 deg off about the TCP, 3.4 deg off).
+    The guard turns only once :attr:`TurnSettings.after_shifts` sideways shifts met resistance: a front
+    resting on the rim beside the mouth (a lateral miss) feels a torque that can turn it the wrong way
+    (turning at the first resistance, gen_t_slot_slide_s0_0 seed 8, in after one shift without turns, jammed
+    at 23.6 of 50 mm 2.7 deg turned), and the search frees a lateral miss within a few shifts (the slow
+    real-peg test: 4). Waiting for shifts at one depth does not tell the two apart: a miss on a flat rim
+    stops at one depth too, and a wedged slider creeps deeper with each shift.
     Turns are not judged by the depth each gains: a turn series taken back when the part got no deeper lost
     gen_dovetail_slide_s0_3 seed 7, whose first turns gain nothing until the later ones free it.
     """

@@ -384,10 +384,8 @@ def guarded_insert(
             out.inserted = True  # it met the seat (a blind hole's bottom, a stop) where the plan ends
             break
         out.contacts.append(InsertionContact(depth, force, slip, g.seconds, float(np.linalg.norm(offset))))
-        # a tilt, not a lateral miss, once shifts meet the resistance at one depth: turn from then on
-        last = [c.depth_m for c in out.contacts[-(s.turn.after_shifts + 1) :]]
-        tilted = len(last) > s.turn.after_shifts and max(last) - min(last) <= s.turn.same_depth_m
-        turn = turner.next(g.torque()) if turner.tried or tilted else False
+        # the sideways search first (a lateral miss); still resisted after its shifts: a tilt, turn from then on
+        turn = turner.next(g.torque()) if len(out.contacts) > s.turn.after_shifts else False
         tries += not turn
         if tries > s.max_tries:
             out.reason = f"still resisted after {s.max_tries} sideways corrections"
