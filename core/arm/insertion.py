@@ -17,6 +17,9 @@ real cell inserts force-guided instead; :func:`guarded_insert` does the same on 
   on a hole's rim and a cap on a post's top are pushed opposite ways), else along a spiral of growing
   radius, as a cell's search insertion does; it
   never pushes past ``force_limit_n`` or ``slip_limit_m``;
+- still resisted after the search's first shifts (a tilt, not a lateral miss), it turns the hand with the
+  contact torque about the part's leading end before each shift, as a compliant wrist yields
+  (:class:`~asmteach.core.arm.compliance.TorqueTurn`, bounded per turn and in all);
 - it watches the other part: how far it moved while the part came in, and when; the other part pushed more
   than ``other_moved_m`` since the last correction is resistance too (a light part slides on the table
   before any force builds up);
