@@ -97,10 +97,6 @@ class NearSymmetry:
             return float("inf")
         return 1000.0 * float(np.linalg.norm(A[:3, 3] - (B @ S)[:3, 3]))
 
-    def maps(self, S: np.ndarray) -> bool:
-        """Whether the part-frame motion ``S`` (4x4), its translation refit, maps the surface within ``tol``."""
-        return self.gap(self._shifted(S)) <= self.tol
-
     def same(self, A: np.ndarray, B: np.ndarray, mm: float = 5.0) -> bool:
         """Whether poses ``A`` and ``B`` put the surface in the same place within ``tol``, up to a shift of at
         most ``mm`` (the pose tolerance's) that the refit removes."""

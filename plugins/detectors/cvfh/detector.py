@@ -139,10 +139,6 @@ class CvfhIcpDetector(Detector):
         thin = float(part.mesh.bounding_box_oriented.primitive.extents.min()) < s.thin_height
         free = free_axes(part.mesh, com, s.pin_same) if s.pin_sigmas > 0 else np.zeros((0, 3))
         same = NearSymmetry(part.mesh, s.same_surface, seed=self.seed) if s.same_surface > 0 else None
-        if same is not None:
-            # A hull twin that maps the surface onto itself within same_surface is a symmetry the list missed,
-            # not a twin: the soccer ball's ~120 were each refined and verified, 13-15 s a scene, to be dropped.
-            twins = [S for S in twins if not same.maps(S)]
         prep = Prepared(
             model,
             db,
