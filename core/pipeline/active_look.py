@@ -20,6 +20,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -35,7 +36,7 @@ from asmteach.core.trajectory.batch import batched
 from asmteach.core.trajectory.blended import time_optimal
 from asmteach.core.trajectory.timing import to_trajectory
 
-__all__ = ["LookOutcome", "closer_for", "look_closer", "seen_heightmap", "wrist_arms"]
+__all__ = ["LookOutcome", "closer_for", "look_closer", "seen_heightmap", "wrist_arms", "write_view_ply"]
 
 ROLLS_DEG = (0.0, 90.0, 180.0, 270.0)
 """Turns of the camera about its optical axis tried for IK: the view is the same, the wrist is not."""
@@ -51,6 +52,8 @@ class LookOutcome:
     detection: Detection
     looks: list[dict[str, Any]] = field(default_factory=list)
     robot_seconds: float = 0.0
+    views: list[DepthView] = field(default_factory=list)
+    """The wrist views the looks took, in order (world frame)."""
 
 
 def wrist_arms(robot: Any) -> list[str]:
@@ -85,6 +88,21 @@ def seen_heightmap(
         T = geometry.from_rotation(np.eye(3), [(i + 0.5) * cell, (j + 0.5) * cell, table.height + h / 2])
         boxes.append(trimesh.creation.box(extents=[cell, cell, h], transform=T))
     return trimesh.util.concatenate(boxes)
+
+
+def write_view_ply(path: Path, view: DepthView) -> None:
+    """``view``'s cloud (world frame, metres) as a binary PLY at ``path``, its camera centre in a header comment
+    (``comment viewpoint x y z``, metres): what a look saw, to inspect or to judge again offline."""
+    pts = np.asarray(view.cloud, "<f4").reshape(-1, 3)
+    eye = " ".join(f"{float(v):.6f}" for v in np.asarray(view.viewpoint, float))
+    header = (
+        "ply\nformat binary_little_endian 1.0\n"
+        f"comment viewpoint {eye}\n"
+        f"element vertex {len(pts)}\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+    )
+    with open(path, "wb") as f:
+        f.write(header.encode("ascii"))
+        f.write(np.ascontiguousarray(pts).tobytes())
 
 
 def _roll(deg: float) -> np.ndarray:
@@ -222,6 +240,7 @@ def look_closer(
             out.robot_seconds += seconds
             made += 1
             wrist_views.append(view)
+            out.views.append(view)
             judged = resolve_by_views(det, part, [*views, *wrist_views], table, symmetries)
             verdict = judged.details.get("resolved_by_view") or judged.details.get("second_view") or {}
             rec.update(
@@ -277,6 +296,18 @@ def closer_for(
             known=known,
         )
         details.setdefault("looks", {})[part.name] = out.looks
+        for i, view in enumerate(views if out.views else ()):
+            # the fixed views the looks were judged with, once per run
+            path = run.out / f"view_{i}.ply"
+            if not path.exists() and view.viewpoint is not None:
+                write_view_ply(path, view)
+                run.artefact(f"view_{i}", path, "ply")
+        for view in out.views:
+            # each look's cloud beside the report: what the judge saw, to inspect or judge again offline
+            name = f"look_{sum(k.startswith('look_') for k in run.report.artefacts) + 1}_{part.name}"
+            path = run.out / f"{name}.ply"
+            write_view_ply(path, view)
+            run.artefact(name, path, "ply")
         clock = run.report.robot_seconds
         clock["total"] = round(clock.get("total", 0.0) + out.robot_seconds, 3)
         clock["look"] = round(clock.get("look", 0.0) + out.robot_seconds, 3)

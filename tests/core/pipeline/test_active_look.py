@@ -196,7 +196,7 @@ def test_the_heightmap_fills_under_what_was_seen() -> None:
     assert np.allclose(mesh.bounds, [[0.40, 0.0, 0.0], [0.41, 0.01, 0.05]])  # one column to the highest point
 
 
-def test_the_runs_look_records_and_counts_robot_seconds(case) -> None:
+def test_the_runs_look_records_and_counts_robot_seconds(case, tmp_path) -> None:
     from types import SimpleNamespace
 
     from asmteach.core.pipeline.active_look import closer_for
@@ -208,8 +208,10 @@ def test_the_runs_look_records_and_counts_robot_seconds(case) -> None:
         execution=SimpleNamespace(look_closer=2, depth_frames=4),
         plugin=lambda role: _Straight(),
         symmetries=lambda p: syms,
-        report=SimpleNamespace(robot_seconds={"total": 1.0}),
+        report=SimpleNamespace(robot_seconds={"total": 1.0}, artefacts={}),
+        out=tmp_path,
     )
+    run.artefact = lambda name, path, kind: run.report.artefacts.__setitem__(name, str(path))
     details: dict = {}
     look = closer_for(run, robot, part, [first], TablePlane(), details)
     assert look is not None
@@ -218,5 +220,16 @@ def test_the_runs_look_records_and_counts_robot_seconds(case) -> None:
     seconds = sum(t.times[-1] for t in robot.executed)
     assert run.report.robot_seconds["look"] == pytest.approx(seconds, abs=1e-3)
     assert run.report.robot_seconds["total"] == pytest.approx(1.0 + seconds, abs=1e-3)
+    # what the judge saw is beside the report: the fixed view and each look, camera centre in the header
+    made = [rec for rec in details["looks"]["d_peg"] if rec.get("made")]
+    assert sorted(run.report.artefacts) == sorted(["view_0"] + [f"look_{i + 1}_d_peg" for i in range(len(made))])
+    ply = tmp_path / "look_1_d_peg.ply"
+    header = ply.read_bytes().split(b"end_header")[0].decode()
+    eye = [float(v) for v in header.split("comment viewpoint ")[1].split()[:3]]
+    assert np.allclose(eye, np.array(made[0]["T_world_cam_mm"]) / 1000.0, atol=1e-4)
+    import open3d as o3d
+
+    assert len(o3d.io.read_point_cloud(str(ply)).points) == made[0]["points"]
+    assert len(o3d.io.read_point_cloud(str(tmp_path / "view_0.ply")).points) == len(first.cloud)
     run.execution.look_closer = 0  # switched off: no look at all
     assert closer_for(run, robot, part, [first], TablePlane(), details) is None
