@@ -125,6 +125,15 @@ class ExecutionSettings(StrictModel):
         "judged on every view (asmteach.core.pipeline.active_look); 0 switches it off, and so does a robot without a "
         "wrist camera",
     )
+    in_hand: Literal["off", "measure", "reaim"] = Field(
+        "measure",
+        description="the depth cameras' look at a held part before its insertion: 'measure' records it (the "
+        "trace's 'measure in hand' event), 'reaim' also re-aims the insertion for it when it is clearly off "
+        "(asmteach.core.pipeline.execute.REALIGN_*), 'off' skips it. Not 'reaim' by default: the 1 m Kinect's look "
+        "cannot see what a near-symmetric part's turn hangs on (a D flat, a hex's faces), and in the structures "
+        "sweep every re-aim it made jammed a part the planned line put in (d_peg 0 seed 8: in at 0.26 mm / 1.4 deg "
+        "without it; hex_peg 0 seed 7; docs/results/structures_corpus.md, Session 16)",
+    )
     fixture: Literal["auto", "never", "always"] = Field(
         "auto",
         description="a jig holds A while B goes in (asmteach.core.arm.fixture): 'auto' when the plan says A at its "

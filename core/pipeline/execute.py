@@ -249,7 +249,8 @@ def _compliance_centre(
 
 def _insert(run: Run, robot: Robot, seg: Any, trace: ExecutionTrace, aim: dict[str, np.ndarray]) -> float | None:
     """Run an insertion guarded (:func:`~asmteach.core.arm.insertion.guarded_insert`) when its arm holds a part,
-    re-aimed for the part's pose measured in the hand (:func:`_line_end`); the robot seconds it took, or None
+    with the part measured in the hand first (``execution.in_hand``) and, when that is ``"reaim"``, re-aimed for
+    it (:func:`_line_end`); the robot seconds it took, or None
     when the arm holds nothing (it runs as planned). An insertion that stops short fails the stage as a jam
     (depth, force, time)."""
     report = run.report
@@ -260,9 +261,10 @@ def _insert(run: Run, robot: Robot, seg: Any, trace: ExecutionTrace, aim: dict[s
     other = trace.other_part(part)
     q = np.asarray(seg.trajectory.positions)
     T_end = robot.fk(arm, q[-1])
-    measured = _measure_in_hand(run, robot, arm, part, trace)
+    look = run.execution.in_hand
+    measured = _measure_in_hand(run, robot, arm, part, trace) if look != "off" else None
     line_end = None
-    if measured is not None and measured.T_world_part is not None:
+    if look == "reaim" and measured is not None and measured.T_world_part is not None:
         line_end = _line_end(run, robot, arm, part, trace, T_end, measured.T_world_part, measured.chi2)
     centre = _compliance_centre(robot, arm, part, trace, robot.fk(arm, q[0]), T_end)
     outcome = guarded_insert(robot, seg.trajectory, part, other, line_end=line_end, centre_tcp=centre)

@@ -92,7 +92,7 @@ def test_an_insertion_that_stops_short_fails_the_execute_stage_as_a_jam(monkeypa
     monkeypatch.setattr(
         execute, "guarded_insert", lambda robot, traj, part, other, line_end=None, centre_tcp=None: stuck
     )
-    run = SimpleNamespace(report=report, symmetries=lambda part: [])
+    run = SimpleNamespace(report=report, symmetries=lambda part: [], execution=SimpleNamespace(in_hand="measure"))
     with pytest.raises(StageFailed) as failed:
         execute._insert(run, world, seg, trace, {})  # type: ignore[arg-type]
     assert failed.value.cause is FailureCause.JAM
@@ -100,3 +100,37 @@ def test_an_insertion_that_stops_short_fails_the_execute_stage_as_a_jam(monkeypa
         "peg jammed at 6.0 of 15.0 mm depth in 'insert peg at assembled' at t = 40.0 s"
     )
     assert report.failure_details["event"]["insertion"]["depth_mm"] == 6.0
+
+
+@pytest.mark.parametrize("mode", ["off", "measure", "reaim"])
+def test_the_look_in_the_hand_reaims_only_when_asked(monkeypatch: pytest.MonkeyPatch, mode: str) -> None:
+    """``execution.in_hand``: 'off' does not look, 'measure' looks and runs the planned line, 'reaim' re-aims it."""
+    from asmteach.core.arm.insertion import InsertionOutcome
+    from asmteach.core.models import RunReport
+    from asmteach.core.pipeline import execute
+
+    world = _World()
+    trace = ExecutionTrace(world, ["block", "peg"], t0_s=40.0)  # type: ignore[arg-type]
+    trace.before_grip("close on peg", "a", True, "peg")
+    trace.after_grip("a", True, "peg")
+    looked: list[str] = []
+    aimed = np.eye(4)
+    aimed[0, 3] = 0.003
+    measured = SimpleNamespace(T_world_part=np.eye(4), chi2=lambda T: 1000.0)
+    monkeypatch.setattr(execute, "_measure_in_hand", lambda *a: looked.append("look") or measured)
+    monkeypatch.setattr(execute, "_line_end", lambda *a: aimed)
+    monkeypatch.setattr(execute, "_compliance_centre", lambda *a: None)
+    got: dict[str, object] = {}
+
+    def insert(robot, traj, part, other, line_end=None, centre_tcp=None):  # type: ignore[no-untyped-def]
+        got["line_end"] = line_end
+        return InsertionOutcome(inserted=True, depth_m=0.015, length_m=0.015, reason=None)
+
+    monkeypatch.setattr(execute, "guarded_insert", insert)
+    run = SimpleNamespace(
+        report=RunReport(config={}, seed=0), symmetries=lambda part: [], execution=SimpleNamespace(in_hand=mode)
+    )
+    seg = PlanSegment(label="insert peg at assembled", trajectory=_traj(1.0), kind="insertion")
+    execute._insert(run, world, seg, trace, {})  # type: ignore[arg-type]
+    assert looked == ([] if mode == "off" else ["look"])
+    assert (got["line_end"] is aimed) == (mode == "reaim")
