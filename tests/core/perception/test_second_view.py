@@ -20,23 +20,9 @@ EYE_2 = np.array([0.98, 0.0, 0.53])  # across the table, 45 deg down
 TARGET = np.array([0.45, 0.0, 0.0])
 
 
-def _d_peg(r: float = 0.015, flat: float = 0.009, length: float = 0.06) -> trimesh.Trimesh:
-    """A round peg with a flat at x = ``flat`` (its section is convex: the hull of the D outline), axis along y."""
-    a = np.linspace(0.0, 2.0 * np.pi, 96, endpoint=False)
-    ring = np.c_[r * np.cos(a), r * np.sin(a)]
-    ring = ring[ring[:, 0] <= flat]
-    half = np.sqrt(r * r - flat * flat)
-    outline = np.r_[ring, [[flat, -half], [flat, half]]]
-    pts = np.r_[
-        np.c_[outline[:, 0], np.full(len(outline), -length / 2), outline[:, 1]],
-        np.c_[outline[:, 0], np.full(len(outline), length / 2), outline[:, 1]],
-    ]
-    return trimesh.convex.convex_hull(pts)
-
-
 @pytest.fixture(scope="module")
-def peg() -> PartModel:
-    mesh = _d_peg()
+def peg(d_peg_mesh: trimesh.Trimesh) -> PartModel:
+    mesh = d_peg_mesh
     return PartModel(PartSpec(name="d_peg", mesh="d_peg.stl"), mesh, 0.1, np.asarray(mesh.center_mass))
 
 

@@ -15,20 +15,6 @@ CLOSE = KinectSettings(min_range=0.1, max_range=1.0, axial_a=0.0005, axial_b=0.0
 """A short-range, low-noise sensor such as a wrist camera's."""
 
 
-def _d_peg(r: float = 0.015, flat: float = 0.009, length: float = 0.06) -> trimesh.Trimesh:
-    """A round peg with a flat at x = ``flat``, axis along y (the hull of the D outline)."""
-    a = np.linspace(0.0, 2.0 * np.pi, 96, endpoint=False)
-    ring = np.c_[r * np.cos(a), r * np.sin(a)]
-    ring = ring[ring[:, 0] <= flat]
-    half = np.sqrt(r * r - flat * flat)
-    outline = np.r_[ring, [[flat, -half], [flat, half]]]
-    pts = np.r_[
-        np.c_[outline[:, 0], np.full(len(outline), -length / 2), outline[:, 1]],
-        np.c_[outline[:, 0], np.full(len(outline), length / 2), outline[:, 1]],
-    ]
-    return trimesh.convex.convex_hull(pts)
-
-
 def _poses(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
     """Lying on its round side at (0.45, 0) with the flat facing +x, and turned 20 deg about its axis."""
     T = np.eye(4)
@@ -51,8 +37,8 @@ def test_candidates_keep_the_sensor_range() -> None:
         assert np.isclose(np.degrees(np.arcsin(-ray[2] / np.linalg.norm(ray))), el)
 
 
-def test_the_side_that_shows_the_flat_ranks_first() -> None:
-    mesh = _d_peg()
+def test_the_side_that_shows_the_flat_ranks_first(d_peg_mesh: trimesh.Trimesh) -> None:
+    mesh = d_peg_mesh
     T_true, T_rival = _poses(mesh)
     syms = part_symmetries(mesh, np.asarray(mesh.center_mass))
     grid = ViewChoiceSettings(distances=[0.2, 0.275, 0.35], elevations_deg=[35.0, 55.0, 75.0])
@@ -70,8 +56,8 @@ def test_the_side_that_shows_the_flat_ranks_first() -> None:
     assert np.isclose(twice[0].separation, 2.0 * best.separation)
 
 
-def test_an_occluder_on_the_flat_side_hides_it() -> None:
-    mesh = _d_peg()
+def test_an_occluder_on_the_flat_side_hides_it(d_peg_mesh: trimesh.Trimesh) -> None:
+    mesh = d_peg_mesh
     T_true, T_rival = _poses(mesh)
     wall = trimesh.creation.box(extents=[0.01, 0.3, 0.3])
     T_wall = geometry.from_rotation(np.eye(3), [0.49, 0.0, 0.15])
@@ -82,8 +68,8 @@ def test_an_occluder_on_the_flat_side_hides_it() -> None:
     assert hidden[0].separation < free[0].separation
 
 
-def test_one_pose_has_nothing_to_tell_apart() -> None:
-    mesh = _d_peg()
+def test_one_pose_has_nothing_to_tell_apart(d_peg_mesh: trimesh.Trimesh) -> None:
+    mesh = d_peg_mesh
     assert rank_viewpoints(mesh, [_poses(mesh)[0]], CLOSE, TablePlane()) == []
 
 

@@ -25,19 +25,6 @@ TABLE = trimesh.creation.box(extents=[0.8, 1.2, 0.02])
 T_TABLE = geometry.from_rotation(np.eye(3), [0.45, 0.0, -0.01])
 
 
-def _d_peg(r: float = 0.015, flat: float = 0.009, length: float = 0.06) -> trimesh.Trimesh:
-    a = np.linspace(0.0, 2.0 * np.pi, 96, endpoint=False)
-    ring = np.c_[r * np.cos(a), r * np.sin(a)]
-    ring = ring[ring[:, 0] <= flat]
-    half = np.sqrt(r * r - flat * flat)
-    outline = np.r_[ring, [[flat, -half], [flat, half]]]
-    pts = np.r_[
-        np.c_[outline[:, 0], np.full(len(outline), -length / 2), outline[:, 1]],
-        np.c_[outline[:, 0], np.full(len(outline), length / 2), outline[:, 1]],
-    ]
-    return trimesh.convex.convex_hull(pts)
-
-
 def _q(T: np.ndarray) -> np.ndarray:
     return np.r_[T[:3, 3], Rotation.from_matrix(T[:3, :3]).as_rotvec()]
 
@@ -119,8 +106,8 @@ class _Straight:
 
 
 @pytest.fixture(scope="module")
-def case() -> tuple[PartModel, np.ndarray, np.ndarray, DepthView]:
-    mesh = _d_peg()
+def case(d_peg_mesh: trimesh.Trimesh) -> tuple[PartModel, np.ndarray, np.ndarray, DepthView]:
+    mesh = d_peg_mesh
     part = PartModel(PartSpec(name="d_peg", mesh="d_peg.stl"), mesh, 0.1, np.asarray(mesh.center_mass))
     T_true = np.eye(4)
     T_true[:3, 3] = [0.45, 0.0, -float(mesh.bounds[0, 2])]  # the flat faces +x: away from the Kinect
