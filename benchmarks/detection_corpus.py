@@ -35,8 +35,10 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
+import yaml
 
 from asmteach.core import registry
+from asmteach.core.config.loading import set_dotted
 from asmteach.core.interfaces import Detector, PartModel
 from asmteach.core.parts import PartSpec, build_part
 from asmteach.plugins.detectors.cvfh.corpus_measure import run_part
@@ -98,6 +100,13 @@ def main() -> None:
     ap.add_argument("--scenes", type=int, default=5, help="scenes per part")
     ap.add_argument("--seed", type=int, default=0, help="corpus and scene seed")
     ap.add_argument("--detector", default="cvfh_icp", help="detector plugin")
+    ap.add_argument(
+        "--set",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="detector settings (dotted keys, YAML values), e.g. refine.visible_icp=true",
+    )
     ap.add_argument("--out", type=Path, default=OUT, help="CSV of every scene")
     ap.add_argument("--cad", action="store_true", help="load each part from a CAD-style mm STL with open faces")
     ap.add_argument("--two-view", action="store_true", help="also judge ambiguous detections by a second view")
@@ -121,13 +130,19 @@ def main() -> None:
     from asmteach.core.config import TableSettings
     from asmteach.plugins.detectors.cvfh.scenes import second_camera_pose
 
+    settings: dict = {}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise SystemExit(f"--set {item}: expected KEY=VALUE")
+        set_dotted(settings, key, yaml.safe_load(value))
     T_cam2 = second_camera_pose(TableSettings(), args.second_eye) if args.two_view else None
     rows: list[dict] = []
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         for cp in corpus:
             part = load_part(cp.name, cp.mesh, Path(tmp), args.seed, args.cad)
-            detector = registry.create("detectors", args.detector, {}, seed=args.seed)
+            detector = registry.create("detectors", args.detector, settings, seed=args.seed)
             assert isinstance(detector, Detector)
             got = run_part(cp.name, cp.mesh, part, detector, args.scenes, args.seed, T_cam2=T_cam2)
             for r in got:

@@ -94,7 +94,8 @@ class ClusterJob:
     ) -> np.ndarray:
         """:func:`icp_refine` of ``points`` (world, metres), counted in :attr:`icp_passes`."""
         self.icp_passes += passes.get("coarse", True) + passes.get("fine", True)
-        return icp_refine(points, model, T_world_part, s, **passes)
+        eye = self.eye if s.visible_icp else None
+        return icp_refine(points, model, T_world_part, s, viewpoint=eye, **passes)
 
 
 def view_hypotheses(

@@ -53,3 +53,22 @@ def test_a_pose_putting_the_surface_where_another_does_is_not_distinct() -> None
     assert not is_distinct(A, [B], [np.eye(4)], s, same=NearSymmetry(cyl))
     tilted = B @ geometry.from_rotvec(np.radians(20.0) * np.array([1.0, 0.0, 0.0]))
     assert is_distinct(tilted, [B], [np.eye(4)], s, same=NearSymmetry(cyl))
+
+
+def test_cluster_icp_registers_onto_the_seen_surface_only_when_visible_icp_is_set() -> None:
+    """``refine.visible_icp`` makes the detector's ICP pass its camera centre to :func:`icp_refine`."""
+    from asmteach.core.models import TablePlane
+    from asmteach.core.perception.registration import RefineSettings, icp_refine, model_cloud
+    from asmteach.plugins.detectors.cvfh.pose_search import ClusterJob
+
+    box = trimesh.creation.box(extents=[0.04, 0.03, 0.02])
+    model = model_cloud(box, 1000)
+    eye = np.array([0.3, 0.0, 0.4])
+    # only the faces the eye sees, as a camera would give them, and a start 2 mm / 3 deg off
+    seen = model.points[model.normals @ np.array([1.0, 0.0, 1.0]) > 0.1]
+    T0 = _pose(3.0, 0.002)
+    job = ClusterJob(seen, seen, seen, seen, TablePlane(height=-0.01), eye)
+    on, off = RefineSettings(visible_icp=True), RefineSettings()
+    assert job.icp(seen, model, T0, on) == pytest.approx(icp_refine(seen, model, T0, on, viewpoint=eye), abs=1e-12)
+    assert job.icp(seen, model, T0, off) == pytest.approx(icp_refine(seen, model, T0, off), abs=1e-12)
+    assert job.icp_passes == 4
