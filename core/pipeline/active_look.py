@@ -167,16 +167,21 @@ def look_closer(
     symmetries: Sequence[np.ndarray] | None = None,
     known: Sequence[tuple[PartModel, np.ndarray]] = (),
     time_limit: float = 3.0,
-    max_tries: int = 8,
+    max_tries: int = 48,
+    reach_seconds: float = 30.0,
     settings: ViewChoiceSettings | None = None,
 ) -> LookOutcome:
     """``det`` judged again with up to ``looks`` close views of a wrist camera when it is ambiguous.
 
     ``views`` are the fixed cameras' views (the first the one ``det`` came from); ``known`` the other parts whose
     poses are believed (``T_world_part``, obstacles and occluders); ``frames`` depth frames are stacked per look.
-    A viewpoint no arm can reach (no IK, every solution colliding, no path within ``time_limit`` seconds) is
-    recorded with why and the next is tried, ``max_tries`` viewpoints at most. Anything else (found, not
-    ambiguous, no wrist camera, ``looks == 0``) comes back unchanged with no look.
+    The ranked viewpoints are taken in order and each is checked for reach before anything moves (IK, the
+    solutions free of the scene, then a path within ``time_limit`` seconds); one no arm can reach is counted
+    (``looks[0]["reach"]``: viewpoints checked, tries per arm and why they failed, seconds) and the next is
+    taken, ``max_tries`` viewpoints and ``reach_seconds`` seconds of checking at most: the best-ranked views are
+    often close ones the arms cannot reach, and a look from the best reachable one beats none. A path that
+    fails is recorded with why (``not_made``). Anything else (found, not ambiguous, no wrist camera,
+    ``looks == 0``) comes back unchanged with no look.
     """
     rivals = det.details.get("ambiguous") or []
     arms = wrist_arms(robot)
@@ -204,21 +209,26 @@ def look_closer(
         frames=frames,
         settings=settings,
     )
-    out = LookOutcome(det, [{"ranked_viewpoints": len(ranked), "rank_seconds": round(time.perf_counter() - t0, 3)}])
+    reach: dict[str, Any] = {"checked": 0, "tries": 0, "no_ik": 0, "collide": 0, "no_path": 0, "seconds": 0.0}
+    summary = {"ranked_viewpoints": len(ranked), "rank_seconds": round(time.perf_counter() - t0, 3), "reach": reach}
+    out = LookOutcome(det, [summary])
     scene = _scene(robot, obstacles)
     wrist_views: list[DepthView] = []
     made = 0
-    for vp in ranked[:max_tries]:
-        if made >= looks:
+    for rank, vp in enumerate(ranked[:max_tries]):
+        if made >= looks or reach["seconds"] > reach_seconds:
             break
+        reach["checked"] += 1
         for arm in arms:
-            rec: dict[str, Any] = {"arm": arm, **vp.as_details()}
-            out.looks.append(rec)
+            reach["tries"] += 1
             t1 = time.perf_counter()
             q_goal, why = _reach(robot, scene, arm, vp.T_world_cam, cams[arm].T_tcp_cam)
+            reach["seconds"] = round(reach["seconds"] + time.perf_counter() - t1, 3)
             if q_goal is None:
-                rec["not_made"] = why
+                reach["no_ik" if why == "no IK solution" else "collide"] += 1
                 continue
+            rec: dict[str, Any] = {"arm": arm, "rank": rank, **vp.as_details()}
+            out.looks.append(rec)
             q0 = np.asarray(robot.current(arm), float)
             valid = batched(
                 lambda q, a=arm: not bool(scene.in_collision(a, np.asarray(q, float)[None, :])[0]),
@@ -227,6 +237,8 @@ def look_closer(
             lo, hi = robot.joint_limits(arm)
             res = motion.plan(q0, q_goal, lower=lo, upper=hi, is_valid=valid, time_limit=time_limit)
             if not res.success or res.path is None:
+                reach["no_path"] += 1
+                reach["seconds"] = round(reach["seconds"] + time.perf_counter() - t1, 3)  # a failed plan checked reach
                 rec["not_made"] = f"no path: {res.reason}"
                 continue
             path = np.asarray(res.path, float)

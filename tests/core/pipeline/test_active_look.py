@@ -164,7 +164,24 @@ def test_a_look_that_cannot_be_made_says_why(case) -> None:
     det = _ambiguous(part, [rival, T_true])
     out = look_closer(robot, det, part, [first], TablePlane(), _Straight(), looks=2, max_tries=3)
     assert out.detection is det and not robot.executed and out.robot_seconds == 0.0
-    assert [rec["not_made"] for rec in out.looks[1:]] == ["all 4 IK solutions collide"] * 3
+    assert len(out.looks) == 1  # no viewpoint reached: only the counts
+    reach = out.looks[0]["reach"]
+    assert (reach["checked"], reach["tries"], reach["collide"], reach["no_ik"], reach["no_path"]) == (3, 3, 3, 0, 0)
+
+
+def test_the_best_reachable_viewpoint_is_taken_when_the_best_are_not(case) -> None:
+    part, T_true, rival, first = case
+    robot = _FlyingCamera(part.mesh, T_true)
+    robot.scene.floor = 0.2  # the TCP collides below 0.2 m: the close, low viewpoints are out of reach
+    syms = part_symmetries(part.mesh, part.center_of_mass)
+    out = look_closer(
+        robot, _ambiguous(part, [rival, T_true]), part, [first], TablePlane(), _Straight(), looks=1, symmetries=syms
+    )
+    reach = out.looks[0]["reach"]
+    made = [rec for rec in out.looks[1:] if rec.get("made")]
+    assert len(made) == 1 and made[0]["rank"] > 0  # the best-ranked one could not be reached, a later one was
+    assert reach["collide"] == made[0]["rank"] and reach["checked"] == made[0]["rank"] + 1
+    assert made[0]["camera_xyz_mm"][2] > 150.0
 
 
 def test_no_wrist_camera_no_look(case) -> None:
