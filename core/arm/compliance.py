@@ -20,10 +20,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from asmteach.core import geometry
 
-__all__ = ["TorqueTurn", "TurnSettings", "leading_point", "torque_about", "turn_about"]
+__all__ = ["TorqueTurn", "TurnSettings", "giving_back", "leading_point", "torque_about", "turn_about"]
 
 
 @dataclass(frozen=True)
@@ -35,7 +36,9 @@ class TurnSettings:
     torque says nothing (a part pressing square on a stop); ``max_turns``: turns before only the sideways
     search goes on; ``after_shifts``: turns begin once this many sideways shifts met resistance (the search
     had its chance at a lateral miss); ``enabled``: False runs the guarded insertion without turns (as before
-    Session 16).
+    Session 16); ``give_back``: once the part is home, the hand turns back toward the planned orientation a
+    step at a time while the guide lets it (:func:`giving_back`): turns that kept it in the hand left
+    gen_dovetail_slide_s0_1 seed 9's slider home but 3.1 deg off in its groove.
     """
 
     gain_rad_per_nm: float = 0.15
@@ -45,6 +48,7 @@ class TurnSettings:
     max_turns: int = 10
     after_shifts: int = 5
     enabled: bool = True
+    give_back: bool = True
 
 
 def torque_about(
@@ -63,6 +67,17 @@ def turn_about(R: np.ndarray, centre: np.ndarray) -> np.ndarray:
     T[:3, :3] = R
     T[:3, 3] = np.asarray(centre, dtype=float) - R @ np.asarray(centre, dtype=float)
     return T
+
+
+def giving_back(R: np.ndarray, step_max_deg: float) -> list[np.ndarray]:
+    """The hand's total turns (3x3, world) that take the turn ``R`` back to none about the same axis, each at most
+    ``step_max_deg`` from the one before; the last is the identity. Empty when ``R`` is no turn."""
+    rotvec = Rotation.from_matrix(np.asarray(R, dtype=float)[:3, :3]).as_rotvec()
+    angle = float(np.linalg.norm(rotvec))
+    if angle < 1e-9:
+        return []
+    n = max(1, int(np.ceil(np.degrees(angle) / step_max_deg - 1e-9)))
+    return [geometry.from_rotvec((1.0 - k / n) * rotvec)[:3, :3] for k in range(1, n + 1)]
 
 
 def leading_point(vertices_tcp: np.ndarray, com_tcp: np.ndarray, direction_tcp: np.ndarray) -> np.ndarray:

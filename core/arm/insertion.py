@@ -37,9 +37,10 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from asmteach.core import geometry
-from asmteach.core.arm.compliance import TorqueTurn, TurnSettings, torque_about, turn_about
+from asmteach.core.arm.compliance import TorqueTurn, TurnSettings, giving_back, torque_about, turn_about
 from asmteach.core.arm.insertion_search import PushSearch, perpendicular, spiral
 from asmteach.core.models import Trajectory
 
@@ -156,6 +157,8 @@ class InsertionOutcome:
     turns_deg: list[float] = field(default_factory=list)
     T_turn: np.ndarray = field(default_factory=lambda: np.eye(4))
     """The torque-guided turns (degrees each) and the world transform they applied to the line's TCP poses."""
+    given_back_deg: float = 0.0
+    """How much of the turns the hand took back once the part was home (degrees; :attr:`TurnSettings.give_back`)."""
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready, in millimetres (the execution trace's unit)."""
@@ -182,6 +185,7 @@ class InsertionOutcome:
             "realigned_deg": round(self.realigned_deg, 2),
             "turns_deg": [round(a, 2) for a in self.turns_deg],
             "turned_deg": round(float(np.degrees(geometry.rotation_angle(self.T_turn[:3, :3]))), 2),
+            "given_back_deg": round(self.given_back_deg, 2),
             "reason": self.reason,
         }
 
@@ -316,6 +320,35 @@ class _Guard:
         )
 
 
+def _give_back(g: _Guard, pos: float, offset: np.ndarray) -> float:
+    """The part home with the hand turned: turn the hand back toward the line's planned orientation about the
+    compliance centre, a step at a time, as a compliant wrist lets the guide straighten the part once it is
+    seated deep in it; a step the guide resists (the contact force over the limit, the part slipping in the
+    hand or the other part pushed) is taken back and the rest kept. Degrees given back."""
+    R0 = g.R_turn
+    rotvec = Rotation.from_matrix(R0).as_rotvec()
+    axis = rotvec / max(float(np.linalg.norm(rotvec)), 1e-12)
+    slip0 = g.reading(pos, offset)[0]
+    g.settle_other()
+    for R in giving_back(R0, g.s.turn.step_max_deg):
+        before, g.R_turn = g.R_turn, R
+        if not g.move_to(g.pose_at(pos, offset)):
+            g.R_turn = before
+            break
+        slip, force, _, _ = g.reading(pos, offset)
+        tau = g.torque()
+        if (
+            slip - slip0 > g.s.slip_limit_m
+            or (np.isfinite(force) and force > g.s.force_limit_n)
+            or g.other_push > g.s.other_moved_m
+            or (tau is not None and float(tau @ axis) > g.s.turn.min_torque_nm)
+        ):
+            g.R_turn = before
+            g.move_to(g.pose_at(pos, offset))
+            break
+    return float(np.degrees(geometry.rotation_angle(R0 @ g.R_turn.T)))
+
+
 def realigned_line_end(T_end: np.ndarray, T_tcp_part_planned: np.ndarray, T_tcp_part_held: np.ndarray) -> np.ndarray:
     """The TCP pose (world, metres) that puts the part held at ``T_tcp_part_held`` (measured in the hand) where
     the planned end ``T_end`` puts it as the plan assumed it held (``T_tcp_part_planned``): ``T_end @
@@ -420,6 +453,8 @@ def guarded_insert(
             out.reason = "no IK for the sideways correction"
             break
         g.settle_other()
+    if out.inserted and turner.steps_deg and s.turn.give_back:
+        out.given_back_deg = _give_back(g, pos, offset)
     out.depth_m = best_depth if not out.inserted else max(best_depth, g.reading(pos, offset)[2])
     out.correction_m = offset
     out.turns_deg, out.T_turn = list(turner.steps_deg), g.turn(g.pose_at(g.length, offset))

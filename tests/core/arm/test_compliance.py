@@ -123,11 +123,14 @@ def _part(name: str, mesh: Any) -> PartModel:
     return PartModel(spec=spec, mesh=mesh, mass=0.04, center_of_mass=np.asarray(mesh.center_mass))
 
 
-def _slide(turn: bool, tilt_deg: float = 1.5, pivot: str = "lead") -> tuple[object, float]:
+def _slide(
+    turn: bool, tilt_deg: float = 1.5, pivot: str = "lead", settings: TurnSettings | None = None
+) -> tuple[object, float]:
     """gen_dovetail_slide_s0_0's slider (0.46 mm play) pushed along its 52 mm groove from 5 mm out, held
     ``tilt_deg`` about the vertical off where the line expects it, turned about its front end (``pivot``
     "lead": the line puts that in the groove's mouth) or about the TCP ("tcp": the front lands beside the
-    mouth): ``(outcome, the slider's angle off the groove at the end in degrees)``."""
+    mouth); ``settings`` replaces the turns' (``turn`` then unused): ``(outcome, the slider's angle off the groove
+    at the end in degrees)``."""
     gs = generate_structure("dovetail_slide", seed=0, index=0)
     a, b = _part("block", gs.part_a), _part("slider", gs.part_b)
     v = np.asarray(gs.v_a, float)  # A stands at the world origin: its frame is the world's
@@ -156,7 +159,7 @@ def _slide(turn: bool, tilt_deg: float = 1.5, pivot: str = "lead") -> tuple[obje
             times=[0.0, 2.0],
             positions=np.vstack([hand.current(""), hand._q(T_end)]),
         )
-        s = replace(InsertionSettings(), turn=TurnSettings(enabled=turn))
+        s = replace(InsertionSettings(), turn=settings or TurnSettings(enabled=turn))
         out = guarded_insert(hand, traj, "slider", "block", settings=s, centre_tcp=centre)
         off = float(np.degrees(geometry.rotation_distance(world.part_pose("slider"), T_goal)))
         return out, off
@@ -191,3 +194,19 @@ def test_a_slider_whose_front_lands_beside_the_mouth_is_shifted_not_turned() -> 
     out, off = _slide(turn=True, tilt_deg=1.5, pivot="tcp")
     assert out.inserted and not out.turns_deg and len(out.contacts) >= 2
     assert off < 1.2
+
+
+def test_turns_the_guide_did_not_need_are_given_back_once_the_slider_is_home() -> None:
+    """A slider held in line with its groove, with turns made eager (at the first resistance, 1 rad per N m, any
+    torque): the hand turns 8 times by 0.5 deg while the front finds the mouth and the slider is pulled home 2.4 deg off
+    (gen_dovetail_slide_s0_1 seed 9: home 3.1 deg off). Home, the hand turns back while the contact torque does
+    not oppose it: in line (measured while writing this: 0.0 deg). A slider the turns did bring into line (3 deg
+    held off) keeps them: the groove's walls resist the first step back."""
+    eager = TurnSettings(after_shifts=0, gain_rad_per_nm=1.0, min_torque_nm=0.001)
+    out, off = _slide(turn=True, tilt_deg=0.0, settings=eager)
+    assert out.inserted and sum(out.turns_deg) > 2.0 and out.given_back_deg > 1.5
+    assert off < 0.5
+    kept, kept_off = _slide(turn=True, tilt_deg=0.0, settings=replace(eager, give_back=False))
+    assert kept.inserted and kept.given_back_deg == 0.0 and kept_off > 2.0
+    needed, needed_off = _slide(turn=True, tilt_deg=3.0)
+    assert needed.inserted and needed.given_back_deg < 0.5 and needed_off < 1.2
