@@ -12,6 +12,7 @@ geodesic rotation in degrees, of the rough pose (the detector alone, no correcto
     .venv/bin/python benchmarks/detection_corpus.py                 # whole corpus, 5 scenes each
     .venv/bin/python benchmarks/detection_corpus.py --parts 10      # every 4th-ish part (evenly spread)
     .venv/bin/python benchmarks/detection_corpus.py --two-view      # also a second Kinect across the table
+    .venv/bin/python benchmarks/detection_corpus.py --two-view --close-look 2   # and 2 wrist looks (free camera)
 
 ``--two-view`` renders every scene a second time from the second camera (``--second-eye``, default
 :data:`~asmteach.plugins.detectors.cvfh.scenes.SECOND_EYE`; the first view is the same frame as without it),
@@ -41,6 +42,7 @@ from asmteach.core import registry
 from asmteach.core.config.loading import set_dotted
 from asmteach.core.interfaces import Detector, PartModel
 from asmteach.core.parts import PartSpec, build_part
+from asmteach.plugins.detectors.cvfh.close_look import REACH_REGION
 from asmteach.plugins.detectors.cvfh.corpus_measure import run_part
 
 OUT = Path(__file__).resolve().parent / "out" / "detection_corpus.csv"
@@ -70,9 +72,11 @@ def describe(row: dict) -> str:
     return f"miss  {row['reason']}"
 
 
-def _two(row: dict) -> dict:
-    """The row as the two-view outcome (its ``two_*`` keys in place of the one-view ones)."""
-    return {**row, **{k[4:]: v for k, v in row.items() if k.startswith("two_")}, "alternatives": 0}
+def _two(row: dict, prefix: str = "two_") -> dict:
+    """The row as the outcome under ``prefix`` (``two_``: two views; ``look_``: one view and close looks;
+    ``two_look_``: two views and close looks) in place of the one-view keys."""
+    n = len(prefix)
+    return {**row, **{k[n:]: v for k, v in row.items() if k.startswith(prefix)}, "alternatives": 0}
 
 
 def _tally(rows: list[dict]) -> str:
@@ -82,14 +86,22 @@ def _tally(rows: list[dict]) -> str:
     return f"{ok} / {wrong} / {amb} / {len(rows) - ok - wrong - amb}"
 
 
+COLUMNS = {"two_": "two views", "look_": "one view + close looks", "two_look_": "two views + close looks"}
+"""The outcomes a row may hold beside the one-view one (key prefix: column title)."""
+
+
 def family_table(rows: list[dict]) -> str:
-    """Markdown table per family: found ok / wrong / ambiguous / other misses, one view and two views."""
-    lines = ["| family (scenes) | one view: ok / wrong / ambiguous / other | two views: the same |", "|---|---|---|"]
+    """Markdown table per family: found ok / wrong / ambiguous / other misses, one view and every other outcome
+    the rows hold (two views, close looks)."""
+    cols = [p for p in COLUMNS if rows and f"{p}success" in rows[0]]
+    head = "| family (scenes) | one view: ok / wrong / ambiguous / other | " + " | ".join(COLUMNS[p] for p in cols)
+    lines = [head + " |", "|---" * (2 + len(cols)) + "|"]
     families = sorted({r["family"] for r in rows}, key=lambda f: [r["family"] for r in rows].index(f))
     for fam in [*families, None]:
         sel = [r for r in rows if fam is None or r["family"] == fam]
         name = f"**all ({len(sel)})**" if fam is None else f"{fam} ({len(sel)})"
-        lines.append(f"| {name} | {_tally(sel)} | {_tally([_two(r) for r in sel])} |")
+        cells = [_tally(sel), *(_tally([_two(r, p) for r in sel]) for p in cols)]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -118,6 +130,20 @@ def main() -> None:
         metavar=("X", "Y", "Z"),
         help="second camera centre (world x, y; z above the table; metres), looking at the work centre",
     )
+    ap.add_argument(
+        "--close-look",
+        type=int,
+        default=0,
+        metavar="N",
+        help="up to N wrist-camera looks at each ambiguous scene from its best-ranked viewpoints (a free camera)",
+    )
+    ap.add_argument(
+        "--look-region",
+        choices=["reach", "free"],
+        default="reach",
+        help="close-look candidates: reach (close_look.REACH_REGION, a cone from above a Nextage wrist reaches) "
+        "or free (the pipeline's whole grid)",
+    )
     args = ap.parse_args()
 
     from asmteach.core.corpus import part_corpus
@@ -144,7 +170,17 @@ def main() -> None:
             part = load_part(cp.name, cp.mesh, Path(tmp), args.seed, args.cad)
             detector = registry.create("detectors", args.detector, settings, seed=args.seed)
             assert isinstance(detector, Detector)
-            got = run_part(cp.name, cp.mesh, part, detector, args.scenes, args.seed, T_cam2=T_cam2)
+            got = run_part(
+                cp.name,
+                cp.mesh,
+                part,
+                detector,
+                args.scenes,
+                args.seed,
+                T_cam2=T_cam2,
+                close_looks=args.close_look,
+                look_settings=REACH_REGION if args.look_region == "reach" else None,
+            )
             for r in got:
                 r["family"] = cp.family
                 two = ""
@@ -152,6 +188,10 @@ def main() -> None:
                     two = f"  | two views: {describe(_two(r))}"
                 elif T_cam2 is not None and not r["found"]:
                     two = "  | two views: " + r["two_reason"].split(";")[0]
+                for p in ("look_", "two_look_") if args.close_look else ():
+                    if r.get(f"{p}n"):
+                        two += f"  | {COLUMNS[p]} ({r[f'{p}n']}: {r[f'{p}where']}, {r[f'{p}s']} s): "
+                        two += describe(_two(r, p)) if r[f"{p}found"] else r[f"{p}reason"].split(";")[0]
                 print(f"{cp.name:24s} {r['scene']}  {describe(r)}{two}", flush=True)
             rows += got
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -186,8 +226,13 @@ def main() -> None:
             key = "ambiguous" if why.startswith("ambiguous") else re.sub(r"\d+(\.\d+)?", "N", why.split(":")[0])[:60]
             misses[key] = misses.get(key, 0) + 1
     print("not found, by reason:", dict(sorted(misses.items(), key=lambda kv: -kv[1])))
+    if T_cam2 is not None or args.close_look:
+        for p in [q for q in COLUMNS if f"{q}success" in rows[0]]:
+            bad = [f"{r['part']} {r['scene']}" for r in rows if r[f"{p}wrong_found"]]
+            print(f"{COLUMNS[p]}: success {sum(r[f'{p}success'] for r in rows)}/{n}, wrong {len(bad)} {bad}")
     if T_cam2 is not None:
         print(f"second camera at {np.round(T_cam2[:3, 3], 3).tolist()} (world, metres)")
+    if T_cam2 is not None or args.close_look:
         print(family_table(rows))
     print(f"rows -> {args.out}")
 

@@ -32,10 +32,12 @@ from asmteach.core.interfaces import Detector, PartModel
 from asmteach.core.models import Detection
 from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
 from asmteach.core.perception.second_view import DepthView
+from asmteach.core.perception.view_choice import ViewChoiceSettings
 from asmteach.core.pose_error import pose_error
 from asmteach.core.rests.drops import drop_rests, likely_rests
 from asmteach.core.symmetry import equivalent_transforms
 from asmteach.core.symmetry.near import NearSymmetry
+from asmteach.plugins.detectors.cvfh.close_look import CloseLooks, free_looks
 from asmteach.plugins.detectors.cvfh.scenes import default_camera_pose, place_on_table, render_table_scene
 
 __all__ = ["AREA", "asmteach_measure_part", "rest_poses", "run_part", "scene_pose"]
@@ -107,12 +109,18 @@ def run_part(
     tol_mm: float = 5.0,
     tol_deg: float = 5.0,
     T_cam2: np.ndarray | None = None,
+    close_looks: int = 0,
+    look_settings: ViewChoiceSettings | None = None,
 ) -> list[dict]:
     """Render ``scenes`` scenes of ``mesh`` (the truth) and detect ``part`` (as loaded) in each.
 
     ``T_cam2`` (``T_world_cam``): a second Kinect renders each scene too (its own noise seed; the first
     view's frame is the same as without it), and the ambiguous detections are judged against its view
     (:func:`asmteach.core.detect_correct.resolve_by_views`): the row's ``two_*`` keys hold that outcome.
+    ``close_looks``: a detection the first view leaves ambiguous gets up to that many wrist-camera looks from its
+    best-ranked viewpoints (:func:`~asmteach.plugins.detectors.cvfh.close_look.free_looks`, ``look_settings``
+    the candidates): ``look_*`` keys after one Kinect and the looks, ``two_look_*`` after both Kinects and the
+    looks (looked at only when both Kinects leave it ambiguous; else the two-view outcome).
     """
     table = TableSettings()
     com = np.asarray(mesh.center_mass, float)
@@ -148,12 +156,27 @@ def run_part(
         row["truth_in_alternatives"] = any(
             pose_error(T, T_true, right=syms).within(tol_mm, tol_deg) or same.same(T, T_true, tol_mm) for T in alts
         )
+        views = [DepthView(scene.cloud, T_cam[:3, 3])]
+        if close_looks:
+            got = free_looks(
+                det,
+                part,
+                (mesh, T_true),
+                views,
+                scene.table,
+                looks=close_looks,
+                seed=1000 * seed + i,
+                symmetries=syms,
+                settings=look_settings,
+                table_settings=table,
+            )
+            row.update(_look_row("look_", got, T_true, syms, tol_mm, tol_deg, same))
         if T_cam2 is not None:
             other = render_table_scene(
                 DepthCamera(KinectSettings(), seed=1000 * seed + i + 500), mesh, T_true, table=table, T_world_cam=T_cam2
             )
-            views = [DepthView(scene.cloud, T_cam[:3, 3]), DepthView(other.cloud, T_cam2[:3, 3])]
-            two = resolve_by_views(det, part, views, scene.table, syms)
+            two_views = [*views, DepthView(other.cloud, T_cam2[:3, 3])]
+            two = resolve_by_views(det, part, two_views, scene.table, syms)
             row.update({f"two_{k}": v for k, v in _outcome(two, T_true, syms, tol_mm, tol_deg, same).items()})
             judged = two.details.get("resolved_by_view") or two.details.get("second_view") or {}
             best = judged.pop("best_T_world_part", None)
@@ -163,8 +186,45 @@ def run_part(
             row["two_best_pos_mm"] = None if err is None else round(err.position_mm, 2)
             row["two_best_rot_deg"] = None if err is None else round(err.angle_deg, 2)
             row["two_ms"] = two.timing_ms.get("second_view")
+            if close_looks:
+                # only what both Kinects leave ambiguous is looked at (free_looks returns a found one as it is)
+                got = free_looks(
+                    two,
+                    part,
+                    (mesh, T_true),
+                    two_views,
+                    scene.table,
+                    looks=close_looks,
+                    seed=1000 * seed + i,
+                    symmetries=syms,
+                    settings=look_settings,
+                    table_settings=table,
+                )
+                row.update(_look_row("two_look_", got, T_true, syms, tol_mm, tol_deg, same))
         rows.append(row)
     return rows
+
+
+def _look_row(
+    prefix: str,
+    got: CloseLooks,
+    T_true: np.ndarray,
+    syms: list[np.ndarray],
+    tol_mm: float,
+    tol_deg: float,
+    same: NearSymmetry,
+) -> dict:
+    """The outcome after close looks under ``prefix``: as :func:`_outcome`, the looks made, their viewpoints
+    (distance m / elevation / azimuth deg) and the seconds spent ranking and judging."""
+    made = got.looks[1:]
+    where = "; ".join(f"{lk['distance_m']}/{lk['elevation_deg']:.0f}/{lk['azimuth_deg']:.0f}" for lk in made)
+    seconds = (got.looks[0]["rank_seconds"] + sum(lk["compute_seconds"] for lk in made)) if got.looks else 0.0
+    return {
+        **{prefix + k: v for k, v in _outcome(got.detection, T_true, syms, tol_mm, tol_deg, same).items()},
+        prefix + "n": len(made),
+        prefix + "where": where,
+        prefix + "s": round(seconds, 2),
+    }
 
 
 @hookimpl

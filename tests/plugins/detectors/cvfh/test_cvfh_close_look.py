@@ -1,0 +1,75 @@
+"""Close looks of a free wrist camera at a corpus scene: a D peg with its flat away from the Kinect, listed with a
+rival turned 20 deg, is settled from a ranked viewpoint inside the reach region; no look for a found detection."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from asmteach.core import geometry
+from asmteach.core.config import TableSettings
+from asmteach.core.interfaces import PartModel
+from asmteach.core.models import Detection, PartSpec, TablePlane
+from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
+from asmteach.core.perception.second_view import DepthView
+from asmteach.core.pose_error import pose_error
+from asmteach.core.symmetry import part_symmetries
+from asmteach.plugins.detectors.cvfh.close_look import REACH_REGION, free_looks
+from asmteach.plugins.detectors.cvfh.scenes import default_camera_pose, render_table_scene
+
+
+def _ambiguous(poses: list[np.ndarray]) -> Detection:
+    return Detection(
+        part="d_peg",
+        found=False,
+        reason="ambiguous: a pose 0 mm and 20 deg away explains the view as well",
+        details={"ambiguous": [{"T_world_part": T.tolist()} for T in poses], "ambiguous_kind": "near_twin"},
+    )
+
+
+@pytest.fixture(scope="module")
+def case(d_peg_mesh: trimesh.Trimesh) -> tuple[PartModel, np.ndarray, np.ndarray, DepthView]:
+    mesh = d_peg_mesh
+    part = PartModel(PartSpec(name="d_peg", mesh="d_peg.stl"), mesh, 0.1, np.asarray(mesh.center_mass))
+    T_true = np.eye(4)
+    T_true[:3, 3] = [0.45, 0.0, -float(mesh.bounds[0, 2])]  # the flat faces +x: away from the Kinect
+    com = np.asarray(mesh.center_mass, float)
+    R = geometry.from_rotvec([0.0, np.radians(20.0), 0.0])[:3, :3]
+    rival = T_true @ geometry.from_rotation(R, com - R @ com)
+    T_cam = default_camera_pose(TableSettings())
+    scene = render_table_scene(DepthCamera(KinectSettings(), seed=1), mesh, T_true, T_world_cam=T_cam)
+    return part, T_true, rival, DepthView(scene.cloud, T_cam[:3, 3])
+
+
+def test_a_look_from_the_reach_region_settles_the_d_peg(case) -> None:
+    part, T_true, rival, first = case
+    syms = part_symmetries(part.mesh, part.center_of_mass)
+    out = free_looks(
+        _ambiguous([rival, T_true]),
+        part,
+        (part.mesh, T_true),
+        [first],
+        TablePlane(),
+        looks=2,
+        seed=3,
+        symmetries=syms,
+        settings=REACH_REGION,
+    )
+    det = out.detection
+    assert det.found, out.looks
+    assert pose_error(det.rough, T_true, right=syms).within(2.0, 3.0)
+    look = det.details["resolved_by_look"]
+    assert look["winner"] == 1 and look["predicted_separation"] > 0
+    assert look["distance_m"] >= 0.16 and look["elevation_deg"] >= 55.0  # inside the region
+    assert 1 <= len(out.views) <= 2 and out.views[0].sensor is not None  # the wrist sensor's own noise
+    assert out.looks[0]["ranked_viewpoints"] > 0
+
+
+def test_no_look_for_a_found_detection_or_a_single_pose(case) -> None:
+    part, T_true, _, first = case
+    found = Detection(part="d_peg", found=True, rough=T_true.tolist())
+    lone = _ambiguous([T_true])
+    for det in (found, lone):
+        out = free_looks(det, part, (part.mesh, T_true), [first], TablePlane(), looks=2, seed=0)
+        assert out.detection is det and not out.looks and not out.views
