@@ -110,4 +110,6 @@ def test_an_offset_the_look_cannot_tell_from_its_noise_runs_the_planned_line() -
     hand, trace, run = _picked(peg, geometry.from_rpy(0.0, 0.0, 0.0, (0.003, 0.0, 0.0)))  # 3 mm off
     measured = hand.part_pose("peg")
     assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4), measured, lambda T: 5.0) is None  # type: ignore[arg-type]
+    # gen_d_peg_s0_0 seed 8's look scored the belief 58 (and the truth 48): the look's own noise, not an offset
+    assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4), measured, lambda T: 58.3) is None  # type: ignore[arg-type]
     assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4), measured, lambda T: 500.0) is not None  # type: ignore[arg-type]
