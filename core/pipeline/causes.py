@@ -1,7 +1,8 @@
 """Why an assembly ended outside tolerance, named from the execution trace's evidence (issue 23, item 5).
 
 :func:`failure_story` reads the events :class:`~asmteach.core.pipeline.monitor.ExecutionTrace` recorded and
-names what happened, most telling first: a guarded insertion that jammed (depth, contact force, time), a
+names what happened, most telling first: a guarded insertion that jammed (depth, contact force, time) -
+led by what knocked the part it went into before it met it (:func:`jam_story`) -, a
 part that toppled or was pushed by a named motion (how far, when), a part pushed in the hand, a part that
 tilted or dropped when let go; with nothing of that, where the insertion's error came from
 (:func:`insertion_error`). A failure that says only "N mm from its goal" names no cause. Units: mm, deg, N,
@@ -20,6 +21,7 @@ from asmteach.core.models import AssemblyTask, RunReport
 from asmteach.core.pose_error import nearest_symmetric
 
 __all__ = [
+    "KNOCKED_MM",
     "RELEASE_DROP_MM",
     "RELEASE_TILT_DEG",
     "SAME_DEPTH_MM",
@@ -27,6 +29,8 @@ __all__ = [
     "failure_story",
     "insertion_error",
     "jam_note",
+    "jam_story",
+    "knocked_before",
 ]
 
 SLIP_NOTE_MM = 1.0
@@ -36,6 +40,10 @@ before the release met resistance (a jam on an insertion, a collision)."""
 RELEASE_TILT_DEG = 1.0
 """A part that tilts this far (deg) as the hand lets it go settled somewhere the plan did not put it (it leans
 in its hole's clearance, slides off a support)."""
+
+KNOCKED_MM = 3.0
+"""A free part that a motion before an insertion moved this far (mm; A's goal tolerance) was knocked off the pose
+the insertion was planned for: a jam that follows is its consequence, not its cause."""
 
 SAME_DEPTH_MM = 1.0
 """Resistance met within this depth span (mm) through sideways shifts of twice as much is named: the search
@@ -142,6 +150,40 @@ def jam_note(ev: dict[str, Any]) -> str:
     )
 
 
+def knocked_before(events: Sequence[dict[str, Any]], jam: dict[str, Any]) -> dict[str, Any] | None:
+    """The first event, in trace order before ``jam``, in which another motion toppled the part ``jam`` went
+    into (``jam["other"]``; any free part when it is not named) or moved it more than :data:`KNOCKED_MM`;
+    None when nothing did."""
+    for ev in events:
+        if ev is jam:
+            return None
+        if "pushed_mm" not in ev or ev.get("label") == jam.get("label"):
+            continue
+        if jam.get("other") not in (None, ev.get("part")):
+            continue
+        if ev.get("toppled") or ev["pushed_mm"] > KNOCKED_MM:
+            return ev
+    return None
+
+
+def jam_story(events: Sequence[dict[str, Any]], jam: dict[str, Any]) -> tuple[str, FailureCause, dict[str, Any] | None]:
+    """``(what happened, its cause, the knocking event or None)`` for the guarded insertion ``jam`` that stopped
+    short: when a motion before it knocked the part it went into (:func:`knocked_before`), that comes first and is
+    the cause (a topple, or a part moved off its goal), and the jam is told as what followed; else the jam
+    (:func:`jam_note`)."""
+    upset = knocked_before(events, jam)
+    if upset is None:
+        return jam_note(jam), FailureCause.JAM, None
+    holding = f" (holding {upset['holding']})" if upset.get("holding") else ""
+    what = "toppled" if upset.get("toppled") else "was knocked"
+    text = (
+        f"{upset['part']} {what} at {_t(upset)} while {upset['by']!r}{holding} ran (moved "
+        f"{upset['pushed_mm']:.1f} mm, tilted {upset['tilted_deg']:.0f} deg), before the insertion; then "
+        f"{jam_note(jam)}"
+    )
+    return text, FailureCause.TOPPLE if upset.get("toppled") else FailureCause.OFF_GOAL, upset
+
+
 def _same_depth_note(ins: dict[str, Any]) -> str:
     """Resistance met at the same depth however far the line was shifted sideways: the search moved the part
     but nothing it tried changed where it stopped (a rim it never crossed into, a tilt, a stop)."""
@@ -177,7 +219,10 @@ def failure_story(report: RunReport, split: dict[str, float] | None) -> tuple[st
     note = _split_note(split)
     jams = [e for e in events if "insertion" in e and not e["insertion"].get("inserted", True)]
     if jams:
-        return jam_note(jams[-1]) + note, FailureCause.JAM, {"event": _public(jams[-1]), **evidence}
+        text, cause, upset = jam_story(events, jams[-1])
+        if upset is not None:
+            evidence["knocked"] = upset
+        return text + note, cause, {"event": _public(jams[-1]), **evidence}
     toppled = [e for e in events if e.get("toppled")]
     if toppled:
         ev = max(toppled, key=lambda e: e["tilted_deg"])

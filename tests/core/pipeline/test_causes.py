@@ -187,3 +187,26 @@ def test_a_symmetric_a_standing_in_its_twin_pose_splits_as_in_the_pose_nearest_i
     assert plain is not None and plain["a_place_deg"] > 179.0
     split = insertion_error(_report(ev), task, task, a_goal, [np.eye(4), np.linalg.inv(flip)])
     assert split is not None and max(split.values()) < 1e-6
+
+
+def test_a_jam_after_a_motion_knocked_its_seat_is_told_as_that_knock() -> None:
+    jam = {**_jam(False), "other": "holed_block"}
+    # a carry that toppled the block before the peg met it: the topple is the cause, the jam what followed
+    carry = _moved("holed_block", 25.0, 31.6, "carry round_peg to assembled", 17.5, "transit")
+    text, cause, evidence = failure_story(_report(carry, jam), None)
+    assert cause is FailureCause.TOPPLE
+    assert text.startswith("holed_block toppled at t = 17.5 s while 'carry round_peg to assembled' (holding t_slider)")
+    assert "; then round_peg jammed at 6.0 of 15.0 mm" in text
+    assert evidence["knocked"]["by"] == "carry round_peg to assembled"
+    # knocked 5 mm without tipping: moved off its goal
+    carry = _moved("holed_block", 5.0, 1.0, "carry round_peg to assembled", 17.5, "transit")
+    text, cause, _ = failure_story(_report(carry, jam), None)
+    assert cause is FailureCause.OFF_GOAL and text.startswith("holed_block was knocked at t = 17.5 s")
+    # a nudge within A's goal tolerance, another part's topple, or a topple after the jam change nothing
+    for events in (
+        (_moved("holed_block", 2.0, 1.0, "carry", 17.5, "transit"), jam),
+        (_moved("other_block", 25.0, 40.0, "carry", 17.5, "transit"), jam),
+        (jam, _moved("holed_block", 25.0, 40.0, "retreat", 40.0, "approach")),
+    ):
+        text, cause, _ = failure_story(_report(*events), None)
+        assert cause is FailureCause.JAM and text.startswith("round_peg jammed"), events
