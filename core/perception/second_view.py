@@ -42,6 +42,7 @@ __all__ = [
     "near_twins",
     "range_sigma",
     "ray_costs",
+    "ray_inflation",
     "screw_turns",
 ]
 
@@ -80,6 +81,12 @@ class SecondViewSettings(StrictModel):
     twin_mm: float = Field(
         1.5, ge=0.0, description="a turn moving the part's surface this little on average (mm) makes a near twin"
     )
+    block_mm: float = Field(
+        1.0,
+        ge=0.0,
+        description="neighbouring rays in squares this wide (mm, across the view at the part) whose misfits move "
+        "together under the best pose count as fewer independent rays in the paired test's spread (0: none do)",
+    )
 
 
 @dataclass
@@ -103,6 +110,10 @@ class ViewJudgement:
     weakest_gain: float | None = None
     """Cost gap of the cheapest candidate distinct from the winner (squared sigmas)."""
     weakest_z: float | None = None
+    rival_pose: np.ndarray | None = None
+    inflation: float = 1.0
+    """How many rays count as one independent ray in the spread (:func:`ray_inflation`)."""
+    """That candidate (``T_world_part``, refined): with ``pose``, the pair a further view should tell apart."""
 
     def as_details(self) -> dict:
         """JSON-ready summary for ``Detection.details``."""
@@ -117,6 +128,8 @@ class ViewJudgement:
             "closest_rival_gain": None if self.weakest_gain is None else round(self.weakest_gain, 1),
             "closest_rival_z": None if self.weakest_z is None else round(self.weakest_z, 2),
             "best_T_world_part": None if self.pose is None else np.asarray(self.pose).tolist(),
+            "ray_inflation": round(self.inflation, 2),
+            "closest_rival_T_world_part": None if self.rival_pose is None else np.asarray(self.rival_pose).tolist(),
         }
 
 
@@ -151,6 +164,22 @@ def _near_rays(view: DepthView, centers: np.ndarray, radius: float) -> tuple[np.
     d = np.asarray(view.cloud, float)[_in_cone(view, centers, radius)] - np.asarray(view.viewpoint, float)
     rng = np.linalg.norm(d, axis=1)
     return d / rng[:, None], rng
+
+
+def _ray_blocks(view: DepthView, centers: np.ndarray, radius: float, block_m: float) -> np.ndarray:
+    """Block index of each of the view's rays in :func:`_in_cone` (the order of :func:`_near_rays`): the square of
+    side ``block_m`` (metres, in the plane across the view through the candidates' centre) each ray crosses."""
+    eye = np.asarray(view.viewpoint, float)
+    u, _ = _near_rays(view, centers, radius)
+    c = np.asarray(centers, float).mean(axis=0) - eye
+    dist = float(np.linalg.norm(c))
+    a = c / dist
+    e1 = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(a, e1)
+    along = np.maximum(u @ a, 1e-6)
+    ij = np.floor(np.c_[u @ e1, u @ e2] * (dist / along)[:, None] / block_m).astype(np.int64)
+    return np.unique(ij, axis=0, return_inverse=True)[1].reshape(-1)
 
 
 def _predicted_ranges(
@@ -356,13 +385,17 @@ def judge_rivals(
         pool += [_fused_refine(model, T, usable, table) for T in twins]
         costs, on_part = _all_costs(model, pool, usable, table, sensor, s, cands)
         best = int(np.argmin(costs.sum(axis=1)))
+    # The winner's own misfit measures how far neighbouring rays are independent evidence: a close view's
+    # neighbours misfit together (an edge a fraction of a millimetre off, a hole wall's shade), so each ray's cost
+    # difference counts as 1 / inflation of a ray (keyed_peg 2 seed 9's block passed at z 5.85 on single rays).
+    inflation = ray_inflation(costs[best], _all_blocks(model, usable, s, cands))
     cands = pool
     total = costs.sum(axis=1)
     gains, zs = [], []
     weakest = None
     for i, T in enumerate(cands):
         d = costs[i] - costs[best]
-        spread = float(np.sqrt(np.sum(d * d)))
+        spread = float(np.sqrt(np.sum(d * d) * inflation))
         gains.append(float(d.sum()))
         zs.append(gains[-1] / spread if spread > 0 else 0.0)
         if i != best and not pose_error(T, cands[best], right=syms).within(s.distinct_mm, s.distinct_deg):
@@ -395,6 +428,8 @@ def judge_rivals(
         candidates=len(raw_total),
         weakest_gain=None if weakest is None else gains[weakest],
         weakest_z=None if weakest is None else zs[weakest],
+        rival_pose=None if weakest is None else cands[weakest],
+        inflation=inflation,
     )
 
 
@@ -415,3 +450,35 @@ def _all_costs(
     """Ray costs and on-part flags of ``poses`` over every view's rays near the ``around`` poses, side by side."""
     parts = [ray_costs(model, poses, v, table, sensor, s, around) for v in views]
     return np.hstack([c for c, _ in parts]), np.hstack([o for _, o in parts])
+
+
+def _all_blocks(
+    model: ModelCloud, views: list[DepthView], s: SecondViewSettings, around: list[np.ndarray]
+) -> np.ndarray:
+    """Block index of every ray :func:`_all_costs` scores (views side by side, no block shared by two views; each
+    ray its own block when ``block_mm`` is 0)."""
+    centers = np.array([geometry.transform_points(T, model.center[None])[0] for T in around])
+    radius = model.radius + s.margin
+    out, first = [], 0
+    for v in views:
+        if s.block_mm > 0.0:
+            b = _ray_blocks(v, centers, radius, s.block_mm / 1000.0)
+        else:
+            b = np.arange(int(np.count_nonzero(_in_cone(v, centers, radius))))
+        out.append(b + first)
+        first += int(b.max()) + 1 if len(b) else 0
+    return np.concatenate(out) if out else np.empty(0, np.int64)
+
+
+def ray_inflation(costs: np.ndarray, blocks: np.ndarray) -> float:
+    """How much neighbouring rays' costs move together (>= 1): the variance of the per-block sums of ``costs``
+    (one pose's per-ray costs, centred; ``blocks`` a block index per ray) over the variance their rays would give
+    alone. ``n / inflation`` is the effective number of independent rays; 1 when rays misfit independently."""
+    if len(costs) < 2:
+        return 1.0
+    c = costs - costs.mean()
+    alone = float(np.sum(c * c))
+    if alone <= 0.0:
+        return 1.0
+    per_block = np.bincount(blocks, weights=c)
+    return max(1.0, float(np.sum(per_block * per_block)) / alone)

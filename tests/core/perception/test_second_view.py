@@ -188,3 +188,33 @@ def test_a_close_look_never_settles_a_twin_it_cannot_tell_from_the_truth() -> No
     assert verdict.winner is None and verdict.why.startswith("no pose is clearly preferred")
     # the two compared were the truth and its twin, both refined onto the views
     assert min(pose_error(verdict.pose, T, right=syms).angle_deg for T in (T_true, twin)) < 1.0
+
+
+def test_rays_that_misfit_together_count_as_fewer_independent_rays() -> None:
+    from asmteach.core.perception.second_view import ray_inflation
+
+    rng = np.random.default_rng(3)
+    blocks = np.repeat(np.arange(500), 16)  # 500 blocks of 16 rays
+    alone = rng.normal(size=blocks.size) ** 2  # each ray its own noise
+    assert ray_inflation(alone, blocks) == pytest.approx(1.0, abs=0.25)
+    together = np.repeat(rng.normal(size=500) ** 2, 16)  # a block's rays misfit as one
+    assert ray_inflation(together, blocks) == pytest.approx(16.0, rel=1e-6)
+    half = np.repeat(rng.normal(size=1000) ** 2, 8)  # in pairs of 8 within each block of 16
+    assert 6.0 < ray_inflation(half, blocks) < 10.0
+    assert ray_inflation(together, np.arange(blocks.size)) == 1.0  # each ray its own block: nothing to inflate
+
+
+def test_rays_are_blocked_by_where_they_cross_the_part() -> None:
+    from asmteach.core.perception.second_view import _ray_blocks
+
+    # a grid of points 1 mm apart on a plane 0.2 m in front of the camera: 2 mm squares hold 2 x 2 of them
+    xs = (np.arange(20) - 9.5) * 0.001
+    gx, gy = np.meshgrid(xs, xs)
+    cloud = np.c_[gx.ravel(), gy.ravel(), np.full(gx.size, 0.2)]
+    view = DepthView(cloud, np.zeros(3))
+    blocks = _ray_blocks(view, np.array([[0.0, 0.0, 0.2]]), 0.05, 0.002)
+    assert len(blocks) == len(cloud)
+    assert np.bincount(blocks).max() <= 4 and len(np.unique(blocks)) >= 100
+    # the same rays on a plane 0.4 m away cross it twice as far apart: one a square
+    far = _ray_blocks(DepthView(2.0 * cloud, np.zeros(3)), np.array([[0.0, 0.0, 0.4]]), 0.05, 0.002)
+    assert len(np.unique(far)) == len(cloud)
