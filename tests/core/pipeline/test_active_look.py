@@ -237,3 +237,36 @@ def test_the_runs_look_records_and_counts_robot_seconds(case, tmp_path) -> None:
     assert len(o3d.io.read_point_cloud(str(tmp_path / "view_0.ply")).points) == len(first.cloud)
     run.execution.look_closer = 0  # switched off: no look at all
     assert closer_for(run, robot, part, [first], TablePlane(), details) is None
+
+
+def test_a_look_that_settles_nothing_ranks_the_viewpoints_again_for_the_pair_it_leaves(case, monkeypatch) -> None:
+    import asmteach.core.pipeline.active_look as al
+
+    part, T_true, rival, first = case
+    robot = _FlyingCamera(part.mesh, T_true)
+    left = [T_true, T_true @ geometry.from_rotvec([0.0, 0.0, np.radians(90.0)])]  # what the first look leaves
+    ranked_for: list[list[np.ndarray]] = []
+    rank = al.rank_viewpoints
+
+    def recording_rank(mesh, poses, *args, **kwargs):
+        ranked_for.append([np.asarray(T, float) for T in poses])
+        return rank(mesh, poses, *args, **kwargs)
+
+    def judged_ambiguous(det, *args, **kwargs):
+        verdict = {
+            "winner": None,
+            "best_T_world_part": left[0].tolist(),
+            "closest_rival_T_world_part": left[1].tolist(),
+        }
+        details = {**det.details, "second_view": verdict}
+        return det.model_copy(update={"reason": "still ambiguous", "details": details})
+
+    monkeypatch.setattr(al, "rank_viewpoints", recording_rank)
+    monkeypatch.setattr(al, "resolve_by_views", judged_ambiguous)
+    out = look_closer(robot, _ambiguous(part, [rival, T_true]), part, [first], TablePlane(), _Straight(), looks=2)
+    made = [rec for rec in out.looks[1:] if rec.get("made")]
+    assert len(made) == 2 and [rec["ranking"] for rec in made] == [1, 2]
+    assert len(ranked_for) == 2  # once for the fixed view's rivals, once for the pair the first look left
+    assert np.allclose(ranked_for[0][0], rival) and np.allclose(ranked_for[1], left)
+    assert made[0]["camera_xyz_mm"] != made[1]["camera_xyz_mm"]
+    assert "rank_again_seconds" in made[0] and "rank_again_seconds" not in made[1]
