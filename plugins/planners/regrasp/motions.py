@@ -91,11 +91,19 @@ class Checker:
     batch; T-RRT checks whole edges that way).
     """
 
-    def __init__(self, scene: PlanningScene, arm: str) -> None:
-        self.valid = batched(
-            lambda q: not bool(scene.in_collision(arm, np.asarray(q, float)[None, :])[0]),
-            lambda qs: ~np.asarray(scene.in_collision(arm, qs), bool),
-        )
+    def __init__(self, scene: PlanningScene, arm: str, floor: float = 0.0) -> None:
+        """``floor`` (metres, > 0): a configuration is valid only as far as that from the table and obstacles."""
+
+        def many(qs: np.ndarray) -> np.ndarray:
+            qs = np.atleast_2d(np.asarray(qs, float))
+            ok = ~np.asarray(scene.in_collision(arm, qs), bool)
+            if floor > 0.0 and ok.any():
+                # upto=floor: the clearance's OBB bounds prune every pair farther than the floor, so this costs
+                # little more than the collision check
+                ok[ok] = np.asarray(scene.clearance(arm, qs[ok], upto=floor), float) >= floor
+            return ok
+
+        self.valid = batched(lambda q: bool(many(np.asarray(q, float)[None, :])[0]), many)
         # T-RRT climbs this cost map: high within a few mm of obstacles, flat beyond 10 cm (metres),
         # so clearances beyond 10 cm need not be measured exactly.
         cap = 0.10
@@ -124,28 +132,49 @@ def free_motion(
     what: str,
     clearances: list[float],
 ) -> np.ndarray:
-    """A collision-free joint path in ``scene`` from the motion planner, cost = inverse clearance;
-    its minimum clearance (metres) is appended to ``clearances``."""
+    """A collision-free joint path in ``scene`` from the motion planner, cost = inverse clearance, that keeps
+    ``settings.transit_clearance`` where its ends allow (:func:`_clearance_floor`); its minimum clearance
+    (metres) is appended to ``clearances``."""
     chk = Checker(scene, arm)
     lo, hi = robot.joint_limits(arm)
-    res = planner.plan(
-        np.asarray(q_a, float),
-        np.asarray(q_b, float),
-        lower=lo,
-        upper=hi,
-        is_valid=chk.valid,
-        cost=chk.cost,
-        time_limit=settings.motion_time_limit,
-    )
+    q_a, q_b = np.asarray(q_a, float), np.asarray(q_b, float)
+
+    def plan(check: Checker) -> Any:
+        return planner.plan(
+            q_a, q_b, lower=lo, upper=hi, is_valid=check.valid, cost=check.cost, time_limit=settings.motion_time_limit
+        )
+
+    res = plan(chk)
     if not res.success or res.path is None:
         # The goal configuration itself is in collision (a held part against the robot, say): no motion
         # to it can succeed, whatever edge leads there.
         bad_goal = edge[1] if res.kind is FailureKind.GOAL_INVALID else None
         raise MotionFailure(edge, f"{what}: {res.reason}", node=bad_goal, timed_out=res.kind is FailureKind.TIMEOUT)
     path = np.asarray(res.path, float)
-    # clearance of the free motion in the world it was planned in, every 0.05 rad (for the statistics)
-    clearances.append(float(np.min(scene.clearance(arm, densify(path, 0.05)))))
+    # T-RRT's cost only prefers clearance and its shortcuts may graze what they pass (0.2-1.5 mm seen on the
+    # structures' carries): a path that came closer than the floor is planned again with the floor as a constraint
+    floor = _clearance_floor(scene, arm, q_a, q_b, settings.transit_clearance)
+    if floor > 0.0 and float(np.min(scene.clearance(arm, densify(path, CLEARANCE_STEP_RAD), upto=floor))) < floor:
+        kept = plan(Checker(scene, arm, floor=floor))
+        if kept.success and kept.path is not None:
+            path = np.asarray(kept.path, float)
+    # clearance of the free motion in the world it was planned in (for the statistics)
+    clearances.append(float(np.min(scene.clearance(arm, densify(path, CLEARANCE_STEP_RAD)))))
     return path
+
+
+CLEARANCE_STEP_RAD = 0.02
+"""Joint step (radians) at which a free motion's clearance is measured: a link 0.7 m out moves ~14 mm a step."""
+
+
+def _clearance_floor(scene: PlanningScene, arm: str, q_a: np.ndarray, q_b: np.ndarray, wanted: float) -> float:
+    """The clearance (metres) a free motion from ``q_a`` to ``q_b`` can be asked to keep: ``wanted``, or less
+    where an end has less (a hand about to grasp, a part about to go in), with a little slack so an end is
+    itself valid; 0 when ``wanted`` is 0."""
+    if wanted <= 0.0:
+        return 0.0
+    ends = np.asarray(scene.clearance(arm, np.stack([q_a, q_b]), upto=wanted), float)
+    return float(min(wanted, 0.9 * float(np.min(ends))))
 
 
 def straight_line(

@@ -65,6 +65,16 @@ class AssemblySettings(StrictModel):
         description="metres: a relocated placement keeps at least this distance between the part and every "
         "obstacle other than the table (room for the fingers); positions closer are skipped",
     )
+    transit_clearance: float = Field(
+        0.01,
+        ge=0.0,
+        le=0.1,
+        description="metres: a free motion keeps at least this distance from the table, the parts and the other "
+        "arm wherever its two ends have as much (else as much as its closer end has); a path the planner found "
+        "closer is planned again with that floor, and kept only if no path with it is found (the motion's "
+        "least clearance is in the stats); room for the arm lagging its path and a part shifted in the hand. "
+        "0 turns it off",
+    )
     min_down: float = Field(0.3, ge=-1.0, le=1.0, description="cosine: approach to a part on the table from above")
     pregrasp_distance: float = Field(0.06, gt=0.0, description="approach stand-off along the TCP -z")
     lift: float = Field(0.08, gt=0.0, description="lift above the table after grasping / before placing")

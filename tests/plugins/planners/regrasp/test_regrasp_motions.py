@@ -149,3 +149,32 @@ def test_a_straight_path_through_the_scenes_wall_is_refused_naming_the_pair() ->
         straight_line(robot, walled, "main", START, T_goal, settings, ("a", "b"), "line")
     path = straight_line(robot, robot.scene, "main", START, T_goal, settings, ("a", "b"), "line")
     np.testing.assert_allclose(path[-1], GOAL, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", [3, 4, 5])
+def test_a_free_motion_keeps_the_transit_clearance_where_its_ends_allow(seed: int) -> None:
+    robot = PlanarPoint()
+    walled = world_scene(robot.scene, [wall()])
+
+    def least_clearance(wanted: float, start: np.ndarray = START) -> float:
+        path = free_motion(
+            robot,
+            walled,
+            registry.create("motion_planners", "trrt", {}, seed=seed),
+            "main",
+            start,
+            GOAL,
+            AssemblySettings(motion_time_limit=10.0, transit_clearance=wanted),
+            ("a", "b"),
+            "test",
+            [],
+        )
+        dense = np.concatenate([np.linspace(p, q, 200) for p, q in itertools.pairwise(path)])
+        return float(walled.clearance("main", dense).min())
+
+    # the ends are 0.45 from the wall; around its end (y = +-0.5) there is room up to the joint limit (1.0).
+    # The floor holds at the states the planner checks; between them a path may dip by a share of its step
+    assert least_clearance(0.1) >= 0.09
+    assert least_clearance(0.0) < 0.1  # without it the shortcut hugs the wall's corner
+    # an end closer than the floor (0.05 from the wall): the motion keeps what that end has, with slack
+    assert least_clearance(0.1, np.array([-0.1, 0.0])) >= 0.9 * 0.9 * 0.05
