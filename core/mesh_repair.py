@@ -10,7 +10,11 @@ fixed without guessing at the shape, in order:
    cannot close them all, by MeshFix (``pymeshfix``), whose repair is kept
    only when the surface it adds is at most ``max_fill_area`` of the part's
    surface (a few missing triangles, not a missing side whose shape would
-   have to be guessed);
+   have to be guessed). Where both close the holes, the fill that adds the
+   least surface is kept: trimesh closes a four-edge loop by either diagonal,
+   and two missing triangles that met across a fold (a hole's wall and the
+   bottom face) came back as two faces cutting 470 mm^2 across the inside;
+   the missing faces are the smallest surface that closes the loop;
 3. faces re-wound to agree with their neighbours and the shell turned
    outward (positive volume).
 
@@ -53,8 +57,9 @@ def _pymeshfix(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     return trimesh.Trimesh(np.asarray(fix.points), np.asarray(fix.faces), process=True)
 
 
-def repair_mesh(mesh: trimesh.Trimesh, *, name: str = "the mesh",
-                max_fill_area: float = 0.02) -> tuple[trimesh.Trimesh, list[str]]:
+def repair_mesh(
+    mesh: trimesh.Trimesh, *, name: str = "the mesh", max_fill_area: float = 0.02
+) -> tuple[trimesh.Trimesh, list[str]]:
     """A closed, outward-wound copy of ``mesh`` and the changes made, one line each.
 
     ``name`` is used in messages (a file name). Raises :class:`UserError`
@@ -80,6 +85,15 @@ def repair_mesh(mesh: trimesh.Trimesh, *, name: str = "the mesh",
         how = "trimesh"
         if not _closed(filled):
             filled, how = _pymeshfix(m), "MeshFix"
+        else:
+            other = _pymeshfix(m)
+            # MeshFix may also drop or move what it deems faulty: its fill competes only when it added faces alone
+            if (
+                _closed(other)
+                and len(other.vertices) == len(m.vertices)
+                and float(other.area) < float(filled.area) - 1e-9 * float(m.area)
+            ):
+                filled, how = other, "MeshFix (less added surface than trimesh's fill)"
         added = (float(filled.area) - float(m.area)) / max(float(filled.area), 1e-30)
         # trimesh fills only triangle and quad loops: a missing triangle comes back exactly, whatever its size
         if how == "MeshFix" and _closed(filled) and added > max_fill_area:
@@ -97,8 +111,10 @@ def repair_mesh(mesh: trimesh.Trimesh, *, name: str = "the mesh",
                 f"around ({centre[0]:.4g}, {centre[1]:.4g}, {centre[2]:.4g}) in the file's units. "
                 "Close it in the CAD tool and export again"
             )
-        notes.append(f"filled {len(found)} hole(s) ({n_edges} open edges) with {how}; "
-                     f"{len(filled.faces) - len(m.faces):+d} faces")
+        notes.append(
+            f"filled {len(found)} hole(s) ({n_edges} open edges) with {how}; "
+            f"{len(filled.faces) - len(m.faces):+d} faces"
+        )
         m = filled
 
     before = np.asarray(m.faces).copy()

@@ -26,6 +26,24 @@ def test_a_cad_stl_with_open_edges_loads_closed_with_its_volume_and_a_warning(tm
     assert any("filled" in r.getMessage() and "open edges" in r.getMessage() for r in caplog.records)
 
 
+def test_two_missing_faces_across_a_fold_come_back_as_they_were() -> None:
+    # a box without the two triangles that meet along one of its edges (a side's and the top's): the four-edge
+    # loop closes by either diagonal, and trimesh's filler takes the one that cuts the corner off (area 26, volume
+    # 5 of a 1 x 2 x 3 box); the fill that adds the least surface restores the box
+    box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    keep = np.ones(len(box.faces), bool)
+    keep[[1, 3]] = False
+    assert abs(float(np.dot(*box.face_normals[[1, 3]]))) < 0.5  # the two faces lie on different sides
+    opened = trimesh.Trimesh(box.vertices, box.faces[keep], process=False)
+    cut = opened.copy()
+    trimesh.repair.fill_holes(cut)
+    assert cut.is_watertight and abs(cut.volume) == pytest.approx(5.0)  # the corner cut off
+    mended, notes = repair_mesh(opened)
+    assert mended.is_watertight
+    assert mended.volume == pytest.approx(6.0) and mended.area == pytest.approx(22.0)
+    assert any("less added surface" in n for n in notes)
+
+
 def test_flipped_faces_are_rewound_and_an_inverted_shell_turned_outward() -> None:
     box = trimesh.creation.box(extents=(0.04, 0.03, 0.02))
     flipped = box.faces.copy()
