@@ -83,9 +83,11 @@ class RefineSettings(StrictModel):
     icp_fine_distance: float = Field(0.004, gt=0.0, description="correspondence distance of the last ICP pass")
     icp_iterations: int = Field(30, ge=1, description="iterations per ICP pass")
     visible_icp: bool = Field(
-        False,
+        True,
         description="ICP registers onto the model surface the camera sees at each pass's start (icp_refine's "
-        "viewpoint; the detector passes its camera centre), not the whole model",
+        "viewpoint; the detector passes its camera centre), not the whole model: a seen wall pairs with none "
+        "behind it (a cup turned over); corpus, session 17: found 169 -> 171 of 245 with one view, 200 -> 203 "
+        "with two, 0 wrong",
     )
     inlier_distance: float = Field(
         0.004,
