@@ -7,13 +7,18 @@ and the ArUco tests (real photos) use one skip/fail rule.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import pytest
 
 if TYPE_CHECKING:
+    import numpy as np
     import trimesh
+
+    from asmteach.core.interfaces import PartModel
+    from asmteach.core.perception.second_view import DepthView
 
 # tests/conftest.py -> parents[1] is the repository root; the data sit beside it.
 REAL_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
@@ -60,3 +65,56 @@ def d_peg_mesh() -> trimesh.Trimesh:
         np.c_[outline[:, 0], np.full(len(outline), length / 2), outline[:, 1]],
     ]
     return trimesh.convex.convex_hull(pts)
+
+
+@pytest.fixture(scope="session")
+def d_peg_poses(d_peg_mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
+    """``(T_true, T_rival)`` (world, metres; read-only): the D peg lying on its round side at (0.45, 0) with its
+    flat facing +x (away from a Kinect on the robot's side of the table), and that pose turned 20 deg about the
+    peg's axis through its centre of mass (the flat down, out of that Kinect's sight)."""
+    import numpy as np
+
+    from asmteach.core import geometry
+
+    T = np.eye(4)
+    T[:3, 3] = [0.45, 0.0, -float(d_peg_mesh.bounds[0, 2])]
+    com = np.asarray(d_peg_mesh.center_mass, float)
+    R = geometry.from_rotvec([0.0, np.radians(20.0), 0.0])[:3, :3]
+    rival = T @ geometry.from_rotation(R, com - R @ com)
+    for M in (T, rival):
+        M.flags.writeable = False
+    return T, rival
+
+
+@pytest.fixture(scope="session")
+def d_peg_part(d_peg_mesh: trimesh.Trimesh) -> PartModel:
+    """The D peg as a part model (0.1 kg, centre of mass the mesh's); read-only."""
+    import numpy as np
+
+    from asmteach.core.interfaces import PartModel
+    from asmteach.core.models import PartSpec
+
+    return PartModel(PartSpec(name="d_peg", mesh="d_peg.stl"), d_peg_mesh, 0.1, np.asarray(d_peg_mesh.center_mass))
+
+
+@pytest.fixture(scope="session")
+def table_kinect_view() -> Callable[[trimesh.Trimesh, np.ndarray, np.ndarray, int], DepthView]:
+    """``view(mesh, T_world_part, eye, seed)``: one Kinect frame (noise on, seeded) of ``mesh`` on a 0.8 x 1.2 m
+    table whose top is z = 0, from the camera centre ``eye`` (world, metres) looking at the work centre
+    (0.45, 0, 0); the frame's points and the camera centre as a :class:`DepthView`."""
+    import numpy as np
+    import trimesh
+
+    from asmteach.core import geometry
+    from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings, look_at
+    from asmteach.core.perception.second_view import DepthView
+
+    table = trimesh.creation.box(extents=[0.8, 1.2, 0.02])
+    T_table = geometry.from_rotation(np.eye(3), [0.45, 0.0, -0.01])
+
+    def view(mesh: trimesh.Trimesh, T: np.ndarray, eye: np.ndarray, seed: int) -> DepthView:
+        cam = DepthCamera(KinectSettings(), seed=seed)
+        frame = cam.render([(table, T_table), (mesh, T)], look_at(eye, np.array([0.45, 0.0, 0.0])))
+        return DepthView(frame.points_world, eye)
+
+    return view

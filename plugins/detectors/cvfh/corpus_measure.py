@@ -157,19 +157,16 @@ def run_part(
             pose_error(T, T_true, right=syms).within(tol_mm, tol_deg) or same.same(T, T_true, tol_mm) for T in alts
         )
         views = [DepthView(scene.cloud, T_cam[:3, 3])]
+        # the free wrist camera's looks, the same for what one Kinect and what both leave ambiguous
+        look = {
+            "looks": close_looks,
+            "seed": 1000 * seed + i,
+            "symmetries": syms,
+            "settings": look_settings,
+            "table_settings": table,
+        }
         if close_looks:
-            got = free_looks(
-                det,
-                part,
-                (mesh, T_true),
-                views,
-                scene.table,
-                looks=close_looks,
-                seed=1000 * seed + i,
-                symmetries=syms,
-                settings=look_settings,
-                table_settings=table,
-            )
+            got = free_looks(det, part, (mesh, T_true), views, scene.table, **look)
             row.update(_look_row("look_", got, T_true, syms, tol_mm, tol_deg, same))
         if T_cam2 is not None:
             other = render_table_scene(
@@ -188,18 +185,7 @@ def run_part(
             row["two_ms"] = two.timing_ms.get("second_view")
             if close_looks:
                 # only what both Kinects leave ambiguous is looked at (free_looks returns a found one as it is)
-                got = free_looks(
-                    two,
-                    part,
-                    (mesh, T_true),
-                    two_views,
-                    scene.table,
-                    looks=close_looks,
-                    seed=1000 * seed + i,
-                    symmetries=syms,
-                    settings=look_settings,
-                    table_settings=table,
-                )
+                got = free_looks(two, part, (mesh, T_true), two_views, scene.table, **look)
                 row.update(_look_row("two_look_", got, T_true, syms, tol_mm, tol_deg, same))
         rows.append(row)
     return rows

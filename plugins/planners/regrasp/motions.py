@@ -151,15 +151,18 @@ def free_motion(
         bad_goal = edge[1] if res.kind is FailureKind.GOAL_INVALID else None
         raise MotionFailure(edge, f"{what}: {res.reason}", node=bad_goal, timed_out=res.kind is FailureKind.TIMEOUT)
     path = np.asarray(res.path, float)
+    # the free motion's least clearance in the world it was planned in (the statistics, and the floor's test)
+    least = float(np.min(scene.clearance(arm, densify(path, CLEARANCE_STEP_RAD))))
     # T-RRT's cost only prefers clearance and its shortcuts may graze what they pass (0.2-1.5 mm seen on the
-    # structures' carries): a path that came closer than the floor is planned again with the floor as a constraint
+    # structures' free motions): a path that came closer than the floor is planned again with the floor as a
+    # constraint
     floor = _clearance_floor(scene, arm, q_a, q_b, settings.transit_clearance)
-    if floor > 0.0 and float(np.min(scene.clearance(arm, densify(path, CLEARANCE_STEP_RAD), upto=floor))) < floor:
+    if least < floor:
         kept = plan(Checker(scene, arm, floor=floor))
         if kept.success and kept.path is not None:
             path = np.asarray(kept.path, float)
-    # clearance of the free motion in the world it was planned in (for the statistics)
-    clearances.append(float(np.min(scene.clearance(arm, densify(path, CLEARANCE_STEP_RAD)))))
+            least = float(np.min(scene.clearance(arm, densify(path, CLEARANCE_STEP_RAD))))
+    clearances.append(least)
     return path
 
 

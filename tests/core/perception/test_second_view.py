@@ -9,7 +9,7 @@ import trimesh
 from asmteach.core import geometry
 from asmteach.core.detect_correct import detect_and_correct
 from asmteach.core.interfaces import Detector, PartModel
-from asmteach.core.models import Detection, PartSpec, TablePlane
+from asmteach.core.models import Detection, TablePlane
 from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings, look_at
 from asmteach.core.perception.second_view import DepthView, SecondViewSettings, axis_turns, judge_rivals, screw_turns
 from asmteach.core.pose_error import pose_error
@@ -21,31 +21,8 @@ TARGET = np.array([0.45, 0.0, 0.0])
 
 
 @pytest.fixture(scope="module")
-def peg(d_peg_mesh: trimesh.Trimesh) -> PartModel:
-    mesh = d_peg_mesh
-    return PartModel(PartSpec(name="d_peg", mesh="d_peg.stl"), mesh, 0.1, np.asarray(mesh.center_mass))
-
-
-def _true_pose(mesh: trimesh.Trimesh) -> np.ndarray:
-    """Lying on its round side at the work centre, the flat facing +x: away from camera 1, towards camera 2."""
-    T = np.eye(4)
-    T[:3, 3] = [0.45, 0.0, -float(mesh.bounds[0, 2])]
-    return T
-
-
-def _view(mesh: trimesh.Trimesh, T: np.ndarray, eye: np.ndarray, seed: int) -> DepthView:
-    table = trimesh.creation.box(extents=[0.8, 1.2, 0.02])
-    T_table = geometry.from_rotation(np.eye(3), [0.45, 0.0, -0.01])
-    frame = DepthCamera(KinectSettings(), seed=seed).render([(table, T_table), (mesh, T)], look_at(eye, TARGET))
-    return DepthView(frame.points_world, eye)
-
-
-def _rival(mesh: trimesh.Trimesh, T: np.ndarray, deg: float) -> np.ndarray:
-    """``T`` turned about the peg's own axis (y, through its centre of mass): the flat still out of camera 1's
-    sight for the turns used here."""
-    com = np.asarray(mesh.center_mass, float)
-    R = geometry.from_rotvec([0.0, np.radians(deg), 0.0])[:3, :3]
-    return T @ geometry.from_rotation(R, com - R @ com)
+def peg(d_peg_part: PartModel) -> PartModel:
+    return d_peg_part
 
 
 class _Ambiguous(Detector):
@@ -81,8 +58,8 @@ def test_turns_about_the_rivals_screw_axis_pass_through_both() -> None:
     assert pose_error(turns[3], T_b).within(0.01, 0.01)  # the 40 deg turn lands on T_b
 
 
-def test_axis_turns_keep_the_centre_of_mass(peg: PartModel) -> None:
-    T = _true_pose(peg.mesh)
+def test_axis_turns_keep_the_centre_of_mass(peg: PartModel, d_peg_poses) -> None:
+    T = d_peg_poses[0]
     com = np.asarray(peg.mesh.center_mass)
     turns = axis_turns(peg.mesh, T, 30.0)
     assert len(turns) == 3 * 11
@@ -90,11 +67,10 @@ def test_axis_turns_keep_the_centre_of_mass(peg: PartModel) -> None:
         assert np.allclose(geometry.transform_points(Tt, com[None]), geometry.transform_points(T, com[None]))
 
 
-def test_the_second_view_finds_the_d_peg_the_first_cannot_tell(peg: PartModel) -> None:
-    T_true = _true_pose(peg.mesh)
-    rival = _rival(peg.mesh, T_true, 20.0)  # the flat turned down, out of camera 1's sight
-    first = _view(peg.mesh, T_true, EYE_1, seed=1)
-    second = _view(peg.mesh, T_true, EYE_2, seed=2)
+def test_the_second_view_finds_the_d_peg_the_first_cannot_tell(peg: PartModel, d_peg_poses, table_kinect_view) -> None:
+    T_true, rival = d_peg_poses  # the rival: the flat turned down, out of camera 1's sight
+    first = table_kinect_view(peg.mesh, T_true, EYE_1, seed=1)
+    second = table_kinect_view(peg.mesh, T_true, EYE_2, seed=2)
     # the rival listed first: the second view, not the order, must decide
     det = detect_and_correct(_Ambiguous([rival, T_true]), None, first.cloud, peg, TablePlane(), views=[second])
     assert det.found and det.reason is None
@@ -108,12 +84,12 @@ def test_the_second_view_finds_the_d_peg_the_first_cannot_tell(peg: PartModel) -
     alone = detect_and_correct(_Ambiguous([rival, T_true]), None, first.cloud, peg, TablePlane())
     assert not alone.found and "resolved_by_view" not in alone.details
     # and a second camera beside the first sees no more than it
-    beside = _view(peg.mesh, T_true, EYE_1 + np.array([0.0, 0.05, 0.0]), seed=3)
+    beside = table_kinect_view(peg.mesh, T_true, EYE_1 + np.array([0.0, 0.05, 0.0]), seed=3)
     det = detect_and_correct(_Ambiguous([rival, T_true]), None, first.cloud, peg, TablePlane(), views=[beside])
     assert not det.found and det.reason.startswith("still ambiguous after 2 views: no pose is clearly preferred")
 
 
-def test_a_flat_that_neither_camera_sees_stays_ambiguous(peg: PartModel) -> None:
+def test_a_flat_that_neither_camera_sees_stays_ambiguous(peg: PartModel, table_kinect_view) -> None:
     """Resting on its flat, the peg turned a little about its round axis differs only underneath."""
     R = geometry.from_rotvec([0.0, np.pi / 2, 0.0])[:3, :3]  # the flat (normal +x) faces down
     T_true = geometry.from_rotation(R, [0.45, 0.0, 0.0])
@@ -121,22 +97,21 @@ def test_a_flat_that_neither_camera_sees_stays_ambiguous(peg: PartModel) -> None
     centre = geometry.transform_points(T_true, [[0.0, 0.0, 0.0]])[0]  # on the round axis
     turn = geometry.from_rotvec([0.0, np.radians(15.0), 0.0])
     rival = geometry.from_rotation(turn[:3, :3], centre - turn[:3, :3] @ centre) @ T_true
-    first = _view(peg.mesh, T_true, EYE_1, seed=1)
-    second = _view(peg.mesh, T_true, EYE_2, seed=2)
+    first = table_kinect_view(peg.mesh, T_true, EYE_1, seed=1)
+    second = table_kinect_view(peg.mesh, T_true, EYE_2, seed=2)
     det = detect_and_correct(_Ambiguous([T_true, rival]), None, first.cloud, peg, TablePlane(), views=[second])
     assert not det.found
     assert det.reason.startswith("still ambiguous after 2 views: no pose is clearly preferred")
     assert det.details["second_view"]["winner"] is None and det.details["second_view"]["views"] == 2
 
 
-def test_a_view_weighs_its_rays_by_its_own_sensor(peg: PartModel) -> None:
+def test_a_view_weighs_its_rays_by_its_own_sensor(peg: PartModel, d_peg_poses, table_kinect_view) -> None:
     """A close, low-noise camera's view: the same residuals cost more sigmas than the Kinect's would."""
     from asmteach.core.perception.registration import model_cloud
     from asmteach.core.perception.second_view import ray_costs
 
-    T_true = _true_pose(peg.mesh)
-    rival = _rival(peg.mesh, T_true, 20.0)
-    view = _view(peg.mesh, T_true, EYE_2, seed=2)
+    T_true, rival = d_peg_poses
+    view = table_kinect_view(peg.mesh, T_true, EYE_2, seed=2)
     quiet = KinectSettings(axial_a=0.0002, axial_b=0.0, quantize=False)
     model = model_cloud(peg.mesh, 4000)
     kinect, _ = ray_costs(model, [T_true, rival], view, TablePlane())
@@ -166,7 +141,7 @@ def test_near_twins_are_the_turns_that_keep_the_outside() -> None:
     assert len(near_twins(_holed_block(), 10.0, 0.0)) == 0
 
 
-def test_a_close_look_never_settles_a_twin_it_cannot_tell_from_the_truth() -> None:
+def test_a_close_look_never_settles_a_twin_it_cannot_tell_from_the_truth(table_kinect_view) -> None:
     """The hole faces the table: no camera sees it, so the block and its twin turned 180 deg about the normal
     explain every view alike. The listed rivals are the twin and the block on its side; the grid's cheapest
     candidate (one refined: ``refine_top=1``) is not in the truth's basin. The twin must not win for want of the
@@ -176,7 +151,7 @@ def test_a_close_look_never_settles_a_twin_it_cannot_tell_from_the_truth() -> No
     twin = T_true @ geometry.from_rotvec([0.0, 0.0, np.pi])
     side = T_true @ geometry.from_rotvec([np.pi / 2, 0.0, 0.0])
     side[2, 3] = 0.018
-    first = _view(mesh, T_true, EYE_1, seed=1)
+    first = table_kinect_view(mesh, T_true, EYE_1, seed=1)
     close = KinectSettings.wrist_stereo()
     eye = TARGET + 0.15 * np.array([np.cos(np.radians(200.0)), np.sin(np.radians(200.0)), 1.0]) / np.sqrt(2.0)
     table = trimesh.creation.box(extents=[0.8, 1.2, 0.02])

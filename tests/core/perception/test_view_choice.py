@@ -15,15 +15,6 @@ CLOSE = KinectSettings(min_range=0.1, max_range=1.0, axial_a=0.0005, axial_b=0.0
 """A short-range, low-noise sensor such as a wrist camera's."""
 
 
-def _poses(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
-    """Lying on its round side at (0.45, 0) with the flat facing +x, and turned 20 deg about its axis."""
-    T = np.eye(4)
-    T[:3, 3] = [0.45, 0.0, -float(mesh.bounds[0, 2])]
-    com = np.asarray(mesh.center_mass, float)
-    R = geometry.from_rotvec([0.0, np.radians(20.0), 0.0])[:3, :3]
-    return T, T @ geometry.from_rotation(R, com - R @ com)
-
-
 def test_candidates_keep_the_sensor_range() -> None:
     surface = np.array([[0.45, 0.0, 0.0], [0.45, 0.0, 0.08]])
     centre = surface.mean(axis=0)
@@ -37,9 +28,9 @@ def test_candidates_keep_the_sensor_range() -> None:
         assert np.isclose(np.degrees(np.arcsin(-ray[2] / np.linalg.norm(ray))), el)
 
 
-def test_the_side_that_shows_the_flat_ranks_first(d_peg_mesh: trimesh.Trimesh) -> None:
+def test_the_side_that_shows_the_flat_ranks_first(d_peg_mesh: trimesh.Trimesh, d_peg_poses) -> None:
     mesh = d_peg_mesh
-    T_true, T_rival = _poses(mesh)
+    T_true, T_rival = d_peg_poses
     syms = part_symmetries(mesh, np.asarray(mesh.center_mass))
     grid = ViewChoiceSettings(distances=[0.2, 0.275, 0.35], elevations_deg=[35.0, 55.0, 75.0])
     ranked = rank_viewpoints(mesh, [T_rival, T_true], CLOSE, TablePlane(), symmetries=syms, settings=grid)
@@ -56,9 +47,9 @@ def test_the_side_that_shows_the_flat_ranks_first(d_peg_mesh: trimesh.Trimesh) -
     assert np.isclose(twice[0].separation, 2.0 * best.separation)
 
 
-def test_an_occluder_on_the_flat_side_hides_it(d_peg_mesh: trimesh.Trimesh) -> None:
+def test_an_occluder_on_the_flat_side_hides_it(d_peg_mesh: trimesh.Trimesh, d_peg_poses) -> None:
     mesh = d_peg_mesh
-    T_true, T_rival = _poses(mesh)
+    T_true, T_rival = d_peg_poses
     wall = trimesh.creation.box(extents=[0.01, 0.3, 0.3])
     T_wall = geometry.from_rotation(np.eye(3), [0.49, 0.0, 0.15])
     side = ViewChoiceSettings(distances=[0.2, 0.275, 0.35], elevations_deg=[35.0, 55.0])  # no view from above
@@ -68,9 +59,8 @@ def test_an_occluder_on_the_flat_side_hides_it(d_peg_mesh: trimesh.Trimesh) -> N
     assert hidden[0].separation < free[0].separation
 
 
-def test_one_pose_has_nothing_to_tell_apart(d_peg_mesh: trimesh.Trimesh) -> None:
-    mesh = d_peg_mesh
-    assert rank_viewpoints(mesh, [_poses(mesh)[0]], CLOSE, TablePlane()) == []
+def test_one_pose_has_nothing_to_tell_apart(d_peg_mesh: trimesh.Trimesh, d_peg_poses) -> None:
+    assert rank_viewpoints(d_peg_mesh, [d_peg_poses[0]], CLOSE, TablePlane()) == []
 
 
 def _holed_block(top: bool) -> trimesh.Trimesh:

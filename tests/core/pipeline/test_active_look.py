@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from asmteach.core import geometry
 from asmteach.core.interfaces import MotionResult, PartModel
 from asmteach.core.interfaces.robot import IKResult
-from asmteach.core.models import Detection, PartSpec, TablePlane, Trajectory
+from asmteach.core.models import Detection, TablePlane, Trajectory
 from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings, look_at
 from asmteach.core.perception.second_view import DepthView
 from asmteach.core.pipeline.active_look import look_closer, seen_heightmap
@@ -106,16 +106,11 @@ class _Straight:
 
 
 @pytest.fixture(scope="module")
-def case(d_peg_mesh: trimesh.Trimesh) -> tuple[PartModel, np.ndarray, np.ndarray, DepthView]:
-    mesh = d_peg_mesh
-    part = PartModel(PartSpec(name="d_peg", mesh="d_peg.stl"), mesh, 0.1, np.asarray(mesh.center_mass))
-    T_true = np.eye(4)
-    T_true[:3, 3] = [0.45, 0.0, -float(mesh.bounds[0, 2])]  # the flat faces +x: away from the Kinect
-    com = np.asarray(mesh.center_mass, float)
-    R = geometry.from_rotvec([0.0, np.radians(20.0), 0.0])[:3, :3]
-    rival = T_true @ geometry.from_rotation(R, com - R @ com)
-    frame = DepthCamera(KinectSettings(), seed=1).render([(TABLE, T_TABLE), (mesh, T_true)], look_at(EYE, TARGET))
-    return part, T_true, rival, DepthView(frame.points_world, EYE)
+def case(d_peg_part: PartModel, d_peg_poses) -> tuple[PartModel, np.ndarray, np.ndarray, DepthView]:
+    T_true, rival = d_peg_poses  # the flat faces +x: away from the Kinect
+    cam = DepthCamera(KinectSettings(), seed=1)
+    frame = cam.render([(TABLE, T_TABLE), (d_peg_part.mesh, T_true)], look_at(EYE, TARGET))
+    return d_peg_part, T_true, rival, DepthView(frame.points_world, EYE)
 
 
 def _ambiguous(part: PartModel, poses: list[np.ndarray]) -> Detection:

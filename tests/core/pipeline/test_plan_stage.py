@@ -4,13 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import trimesh
 
-from asmteach.core import geometry
-from asmteach.core.interfaces import PartModel
-from asmteach.core.models import Detection, PartSpec, TablePlane
-from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings, look_at
-from asmteach.core.perception.second_view import DepthView
+from asmteach.core.models import Detection, TablePlane
 from asmteach.core.pipeline.plan import placed_or_seen, went_on_guessing
 from asmteach.core.pose_error import pose_error
 from asmteach.core.symmetry import part_symmetries
@@ -33,31 +28,15 @@ EYE_1 = np.array([-0.05, 0.0, 0.70])  # the robot's side of the table, as the sc
 EYE_2 = np.array([0.98, 0.0, 0.53])  # across the table, 45 deg down
 
 
-def _view(mesh: trimesh.Trimesh, T: np.ndarray, eye: np.ndarray, seed: int) -> DepthView:
-    table = trimesh.creation.box(extents=[0.8, 1.2, 0.02])
-    T_table = geometry.from_rotation(np.eye(3), [0.45, 0.0, -0.01])
-    frame = DepthCamera(KinectSettings(), seed=seed).render(
-        [(table, T_table), (mesh, T)], look_at(eye, np.array([0.45, 0.0, 0.0]))
-    )
-    return DepthView(frame.points_world, eye)
-
-
-def _poses(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
-    """The D peg lying at the work centre with its flat towards camera 2, and turned 20 deg about its axis (the
-    flat down, out of camera 1's sight)."""
-    T = np.eye(4)
-    T[:3, 3] = [0.45, 0.0, -float(mesh.bounds[0, 2])]
-    com = np.asarray(mesh.center_mass, float)
-    R = geometry.from_rotvec([0.0, np.radians(20.0), 0.0])[:3, :3]
-    return T, T @ geometry.from_rotation(R, com - R @ com)
-
-
 @pytest.mark.parametrize("truth", ["placed", "seen"])
-def test_a_turn_seen_at_the_goal_must_beat_where_the_part_was_placed(d_peg_mesh, truth: str) -> None:
-    part = PartModel(PartSpec(name="d_peg", mesh="d_peg.stl"), d_peg_mesh, 0.1, np.asarray(d_peg_mesh.center_mass))
-    placed, seen = _poses(d_peg_mesh)
+def test_a_turn_seen_at_the_goal_must_beat_where_the_part_was_placed(
+    d_peg_part, d_peg_poses, table_kinect_view, truth: str
+) -> None:
+    # placed with the flat towards camera 2; seen turned 20 deg, the flat down, out of camera 1's sight
+    part, d_peg_mesh = d_peg_part, d_peg_part.mesh
+    placed, seen = d_peg_poses
     T_true = placed if truth == "placed" else seen
-    views = [_view(d_peg_mesh, T_true, EYE_1, seed=1), _view(d_peg_mesh, T_true, EYE_2, seed=2)]
+    views = [table_kinect_view(d_peg_mesh, T_true, EYE_1, 1), table_kinect_view(d_peg_mesh, T_true, EYE_2, 2)]
     det = Detection(part="d_peg", found=True, rough=seen, details={})
     details: dict = {}
     syms = part_symmetries(d_peg_mesh, part.center_of_mass)
@@ -71,9 +50,9 @@ def test_a_turn_seen_at_the_goal_must_beat_where_the_part_was_placed(d_peg_mesh,
     assert details["placed_vs_seen"]["kept"] == "placed" and not details["placed_vs_seen"]["settled"]
 
 
-def test_a_wrist_look_settles_what_the_fixed_views_leave(d_peg_mesh) -> None:
-    part = PartModel(PartSpec(name="d_peg", mesh="d_peg.stl"), d_peg_mesh, 0.1, np.asarray(d_peg_mesh.center_mass))
-    placed, seen = _poses(d_peg_mesh)
+def test_a_wrist_look_settles_what_the_fixed_views_leave(d_peg_part, d_peg_poses) -> None:
+    part = d_peg_part
+    placed, seen = d_peg_poses
     asked: list[Detection] = []
 
     def closer(d: Detection) -> Detection:

@@ -5,12 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import trimesh
 
-from asmteach.core import geometry
 from asmteach.core.config import TableSettings
 from asmteach.core.interfaces import PartModel
-from asmteach.core.models import Detection, PartSpec, TablePlane
+from asmteach.core.models import Detection, TablePlane
 from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
 from asmteach.core.perception.second_view import DepthView
 from asmteach.core.pose_error import pose_error
@@ -29,17 +27,11 @@ def _ambiguous(poses: list[np.ndarray]) -> Detection:
 
 
 @pytest.fixture(scope="module")
-def case(d_peg_mesh: trimesh.Trimesh) -> tuple[PartModel, np.ndarray, np.ndarray, DepthView]:
-    mesh = d_peg_mesh
-    part = PartModel(PartSpec(name="d_peg", mesh="d_peg.stl"), mesh, 0.1, np.asarray(mesh.center_mass))
-    T_true = np.eye(4)
-    T_true[:3, 3] = [0.45, 0.0, -float(mesh.bounds[0, 2])]  # the flat faces +x: away from the Kinect
-    com = np.asarray(mesh.center_mass, float)
-    R = geometry.from_rotvec([0.0, np.radians(20.0), 0.0])[:3, :3]
-    rival = T_true @ geometry.from_rotation(R, com - R @ com)
+def case(d_peg_part: PartModel, d_peg_poses) -> tuple[PartModel, np.ndarray, np.ndarray, DepthView]:
+    T_true, rival = d_peg_poses  # the flat faces +x: away from the Kinect
     T_cam = default_camera_pose(TableSettings())
-    scene = render_table_scene(DepthCamera(KinectSettings(), seed=1), mesh, T_true, T_world_cam=T_cam)
-    return part, T_true, rival, DepthView(scene.cloud, T_cam[:3, 3])
+    scene = render_table_scene(DepthCamera(KinectSettings(), seed=1), d_peg_part.mesh, T_true, T_world_cam=T_cam)
+    return d_peg_part, T_true, rival, DepthView(scene.cloud, T_cam[:3, 3])
 
 
 def test_a_look_from_the_reach_region_settles_the_d_peg(case) -> None:
