@@ -23,6 +23,9 @@ the new way (a lying peg stood upright for its vertical insertion), so when
 even the widened search fails, the same placements are tried again further
 toward the goal, one position at a time (``relocations``), clear of the
 other obstacles; the part is then carried there, regrasped, and carried on.
+Last, every layer is screened again with approaches from the side allowed
+(``min_down_last``): a headed peg standing on its head shares no top-down
+grasp with any rest that leads to its head-up goal.
 
 This module searches and re-searches; the settings are in :mod:`.settings`,
 the middle-layer slots in :mod:`.slots`, and turning a keyframe path into
@@ -190,8 +193,9 @@ def plan_transfer(
     layers = start_and_goal()
     stats: dict[str, Any] = {"feasible": _feasible(layers, n_end)}
     G = graph(layers)
-    middle_done = widened = False
+    middle_done = widened = sideways = False
     slots: list[PoseSlot] = []
+    moved_slots: list[PoseSlot] = []
     relocations = list(settings.relocations)
     start_xy = np.asarray(T_start, float)[:2, 3]
     goal_xy = np.asarray(goal.slot.T_world_part, float)[:2, 3]
@@ -266,6 +270,7 @@ def plan_transfer(
             )
             stats.setdefault("relocations", []).append(fraction)
             if moved:
+                moved_slots += moved
                 layers += middle_layers(moved, _grasp_ids(layers))
                 stats["feasible"]["middle"] = sum(len(f.solutions) for f in layers[n_end:])
                 G = graph(layers)
@@ -277,6 +282,20 @@ def plan_transfer(
                     if moved
                     else f"{part.name}: placements {where} would come too near an obstacle; skipped"
                 )
+            continue
+        if not search.success and widened and not sideways and settings.min_down_last < screen.min_down:
+            # Approaches from above are the cell's first choice (the fingers come down clear of the table),
+            # but a part can rest only in ways that share no such grasp with its goal: then from the side too.
+            tg = time.perf_counter()
+            sideways = True
+            screen = replace(screen, min_down=settings.min_down_last)
+            layers = start_and_goal()
+            layers += middle_layers(slots + moved_slots, _grasp_ids(layers))
+            stats["feasible"] = {**_feasible(layers, n_end), "widened": True, "sideways": True}
+            G = graph(layers)
+            stats["graph_seconds"] += time.perf_counter() - tg
+            if progress:
+                progress(f"{part.name}: no keyframe path; grasps approaching from the side allowed")
             continue
         stats["graph_nodes"] = G.number_of_nodes() - 2
         stats["graph_edges"] = G.number_of_edges()

@@ -76,6 +76,14 @@ class AssemblySettings(StrictModel):
         "0 turns it off",
     )
     min_down: float = Field(0.3, ge=-1.0, le=1.0, description="cosine: approach to a part on the table from above")
+    min_down_last: float = Field(
+        0.0,
+        ge=-1.0,
+        le=1.0,
+        description="cosine: when even the relocated placements give no keyframe path, every layer is screened "
+        "once more with this bound on the approach to a part on the table (0: from the side too, never from "
+        "below; the hand's sweep is still checked against the table); at or above min_down: never",
+    )
     pregrasp_distance: float = Field(0.06, gt=0.0, description="approach stand-off along the TCP -z")
     lift: float = Field(0.08, gt=0.0, description="lift above the table after grasping / before placing")
     release_gap: float = Field(

@@ -7,7 +7,8 @@ straight above. There the peg's grasp across its side (from above while it
 lies) and its grasp on the top end (from above while it stands) are the only
 ones that work, and no grasp works both lying and standing; nearer the middle
 a diagonal grasp works both ways, so the peg must be put down there and
-regrasped.
+regrasped. When no placement anywhere connects with grasps from above, the
+approaches from the side are allowed last (``min_down_last``).
 """
 
 from collections.abc import Sequence
@@ -26,6 +27,7 @@ from asmteach.core.parts import build_part
 from asmteach.core.rests.placements import compute_placements
 from asmteach.core.robot import PlanningScene
 from asmteach.plugins.planners.regrasp.assembly import TransferResult, _search_cause, plan_transfer
+from asmteach.plugins.planners.regrasp.feasibility import variant_tcp
 from asmteach.plugins.planners.regrasp.graph import GraspFeasibility, KeyframeSearch, PoseSlot
 from asmteach.plugins.planners.regrasp.realise import PlaceGoal
 from asmteach.plugins.planners.regrasp.settings import AssemblySettings
@@ -116,8 +118,25 @@ GRASPS = [
 LYING = Rotation.from_euler("y", 90, degrees=True).as_matrix()  # on its -x face, the axis along world +x
 
 
+class SideReachArm(EdgeOfReachArm):
+    """As :class:`EdgeOfReachArm`, but its IK reaches any approach not from below (cosine >= 0) where
+    |y| > 0.2 m, and only near-vertical ones (>= 0.95) nearer the middle, where the goal is."""
+
+    def ik(self, arm: str, T_world_tcp: np.ndarray, q_seed: np.ndarray | None = None) -> IKResult:
+        down = -T_world_tcp[2, 2]
+        if down < (-1e-9 if abs(T_world_tcp[1, 3]) > 0.2 else 0.95):
+            return IKResult(False, None, reason="wrist limit")
+        q = np.concatenate([T_world_tcp[:3, 3], Rotation.from_matrix(T_world_tcp[:3, :3]).as_rotvec()])
+        return IKResult(True, q, 0.0, 0.0)
+
+
 def transfer(
-    peg: PartModel, settings: AssemblySettings, world: Sequence[Obstacle] = (), T_goal: np.ndarray | None = None
+    peg: PartModel,
+    settings: AssemblySettings,
+    world: Sequence[Obstacle] = (),
+    T_goal: np.ndarray | None = None,
+    grasps: Sequence[Grasp] = GRASPS,
+    robot: Robot | None = None,
 ):
     T_start = geometry.from_rotation(LYING, [*START_XY, 0.01])
     T_goal = geometry.from_rotation(np.eye(3), [*GOAL_XY, 0.0]) if T_goal is None else T_goal
@@ -127,14 +146,14 @@ def transfer(
         calls.append(every)
         return placement_slots(compute_placements(peg), T_start[:2, 3], 0.0, settings, every=every)
 
-    robot = EdgeOfReachArm()
+    robot = EdgeOfReachArm() if robot is None else robot
     before = robot.scene
     res = plan_transfer(
         robot,
         robot.scene,
         StraightLine(),
         peg,
-        GRASPS,
+        grasps,
         T_start=T_start,
         goal=PlaceGoal(PoseSlot("goal", "goal", T_goal), np.array([0.0, 0.0, 0.05]), on_table=False),
         middle_slots=middle,
@@ -178,7 +197,26 @@ def test_without_relocations_the_peg_cannot_be_turned(peg) -> None:
     assert res.stats["cut"] == "between" and res.cause is FailureCause.REGRASP_GRAPH
     # and the reason says how far the start's grasps get, and why they fail at the other placements
     assert "the start's 1 grasp variants reach 2 other slots (placement" in res.reason
-    assert "other table slots: 10 approach not from above;" in res.reason
+    # (screened last with approaches from the side allowed, which this arm's IK does not reach)
+    assert res.stats["feasible"]["sideways"] is True
+    assert "other table slots: 8 no IK solution, 2 approach not from above;" in res.reason
+
+
+def test_a_peg_no_grasp_from_above_can_turn_is_turned_with_a_grasp_from_the_side(peg) -> None:
+    """Without the diagonal grasp, no placement shares a grasp from above (cosine >= 0.3) between lying and
+    standing, and the goal takes only the grasp on the top end: the lying peg is picked by that end from the
+    side and carried upright to its goal."""
+    settings = AssemblySettings(placement_yaws=2, relocations=())
+    res, _ = transfer(peg, settings, grasps=GRASPS[:2], robot=SideReachArm())
+    assert res.success, res.reason
+    assert res.stats["feasible"]["sideways"] is True
+    assert [n[1] // 2 for n in res.search.nodes] == [1, 1] and res.search.regrasps == 0
+    start = res.search.nodes[0]
+    T_world_tcp = res.graph.nodes[start]["slot"].T_world_part @ variant_tcp(dict(enumerate(GRASPS)), start[1])
+    assert abs(T_world_tcp[2, 2]) < 1e-9  # the approach is horizontal
+    # the bound at or above min_down: never from the side, and the graph stays cut
+    off, _ = transfer(peg, settings.model_copy(update={"min_down_last": 0.3}), grasps=GRASPS[:2], robot=SideReachArm())
+    assert not off.success and off.stats["cut"] == "between" and "sideways" not in off.stats["feasible"]
 
 
 def test_a_position_too_near_an_obstacle_is_skipped_for_the_next(peg) -> None:
