@@ -53,16 +53,20 @@ def main() -> None:
             times.append(time.perf_counter() - t0)
         ev = learned.evidence
         load = os.getloadavg()[0]
-        row = (f"| {task.name} | {np.median(times):.3f} | {max(times):.3f} | {len(ev.frames_used) if ev else '?'} "
-               f"| {ev.insertion_source if ev else '?'} | {load:.2f} |")
+        row = (
+            f"| {task.name} | {np.median(times):.3f} | {max(times):.3f} | {len(ev.frames_used) if ev else '?'} "
+            f"| {ev.insertion_source if ev else '?'} | {load:.2f} |"
+        )
         print(row, flush=True)
         rows.append((row, float(np.median(times))))
     worst = max(t for _, t in rows)
-    head = (f"# Teaching speed: {args.frames} frames {cam.width}x{cam.height}, orientation {args.orientation}, "
-            f"{args.repeats} repeats, {os.cpu_count()} cores\n\n"
-            f"Command: `.venv/bin/python {shlex.join(sys.argv)}`\n\n"
-            "| structure | median s | max s | frames used | v_a source | load avg (1 min) |\n"
-            "|---|---|---|---|---|---|\n")
+    head = (
+        f"# Teaching speed: {args.frames} frames {cam.width}x{cam.height}, orientation {args.orientation}, "
+        f"{args.repeats} repeats, {os.cpu_count()} cores\n\n"
+        f"Command: `.venv/bin/python {shlex.join(sys.argv)}`\n\n"
+        "| structure | median s | max s | frames used | v_a source | load avg (1 min) |\n"
+        "|---|---|---|---|---|---|\n"
+    )
     text = head + "\n".join(r for r, _ in rows) + f"\n\nWorst median {worst:.3f} s (target <= 2 s).\n"
     print(f"worst median {worst:.3f} s (target <= 2 s)")
     if args.out:

@@ -104,11 +104,18 @@ def run_seed(config: Path, seed: int, out: Path, execute: bool, go_on: str = "to
         report = pipeline.run_pipeline(cfg, out / f"seed_{seed}")
     finally:
         regrasp_planner.to_plan, pipeline_run.execute_stage = original_to_plan, original_execute
-    row: dict[str, Any] = {"seed": seed, "executed": execute, "go_on": go_on, "success": bool(report.success),
-                           "failed_stage": report.failed_stage or "", "reason": (report.reason or "")[:160],
-                           "computer_s": dict(report.computer_seconds), "robot_executed": dict(report.robot_seconds),
-                           "recheck_collisions": report.metrics.get("plan_recheck_collisions"),
-                           "timings": len(pairing.calls)}
+    row: dict[str, Any] = {
+        "seed": seed,
+        "executed": execute,
+        "go_on": go_on,
+        "success": bool(report.success),
+        "failed_stage": report.failed_stage or "",
+        "reason": (report.reason or "")[:160],
+        "computer_s": dict(report.computer_seconds),
+        "robot_executed": dict(report.robot_seconds),
+        "recheck_collisions": report.metrics.get("plan_recheck_collisions"),
+        "timings": len(pairing.calls),
+    }
     if pairing.calls:
         row.update(pairing.calls[0])  # the plan stage's plan (look_again may time a second one)
     return row
@@ -121,8 +128,10 @@ def _median(values: list[float]) -> float:
 def report(rows: list[dict[str, Any]]) -> str:
     """Per-seed lines and medians, as printed."""
     planned = [r for r in rows if "toppra_robot" in r and r["failed_stage"] != "plan"]
-    lines = ["seed  plan  robot s old -> new (ratio)   transit  approach insert  regrasp   max v/lim old new"
-             "  max a/lim old new  recheck  computer s plan (timing ms old/new)  result"]
+    lines = [
+        "seed  plan  robot s old -> new (ratio)   transit  approach insert  regrasp   max v/lim old new"
+        "  max a/lim old new  recheck  computer s plan (timing ms old/new)  result"
+    ]
     for r in rows:
         if "toppra_robot" not in r:
             lines.append(f"{r['seed']:4d}  no plan: {r['failed_stage']} {r['reason'][:80]}")
@@ -134,39 +143,54 @@ def report(rows: list[dict[str, Any]]) -> str:
             f"{r['seed']:4d}  ok    {old['total']:7.1f} -> {new['total']:6.1f} ({old['total'] / new['total']:4.2f}x)  "
             f"{kinds}   {r['trapezoid_max_v']:.3f} {r['toppra_max_v']:.3f}   {r['trapezoid_max_a']:.3f} "
             f"{r['toppra_max_a']:.3f}   {r['recheck_collisions']!s:>4}   {r['computer_s'].get('plan', 0):6.1f} "
-            f"({1000 * r['trapezoid_timing_s']:.0f}/{1000 * r['toppra_timing_s']:.0f})  {result}")
+            f"({1000 * r['trapezoid_timing_s']:.0f}/{1000 * r['toppra_timing_s']:.0f})  {result}"
+        )
     if planned:
         old = [r["trapezoid_robot"]["total"] for r in planned]
         new = [r["toppra_robot"]["total"] for r in planned]
         lines.append("")
         lines.append(f"plans: {len(planned)} of {len(rows)} seeds")
-        lines.append(f"median robot seconds: trapezoid {_median(old):.1f} s, toppra {_median(new):.1f} s; "
-                     f"median ratio {_median([a / b for a, b in zip(old, new, strict=True)]):.2f}x "
-                     f"(min {min(a / b for a, b in zip(old, new, strict=True)):.2f}x)")
+        lines.append(
+            f"median robot seconds: trapezoid {_median(old):.1f} s, toppra {_median(new):.1f} s; "
+            f"median ratio {_median([a / b for a, b in zip(old, new, strict=True)]):.2f}x "
+            f"(min {min(a / b for a, b in zip(old, new, strict=True)):.2f}x)"
+        )
         for k in KINDS:
-            lines.append(f"  {k:9s} trapezoid {_median([r['trapezoid_robot'][k] for r in planned]):6.1f} s  "
-                         f"toppra {_median([r['toppra_robot'][k] for r in planned]):6.1f} s")
-        lines.append(f"worst sample over all plans: velocity {max(r['toppra_max_v'] for r in planned):.4f} of its "
-                     f"limit (trapezoid {max(r['trapezoid_max_v'] for r in planned):.4f}), acceleration "
-                     f"{max(r['toppra_max_a'] for r in planned):.4f} (trapezoid "
-                     f"{max(r['trapezoid_max_a'] for r in planned):.4f})")
-        lines.append(f"re-check collisions of the toppra plans (PyBullet, 5 mm sweeps): "
-                     f"{sum(int(r['recheck_collisions'] or 0) for r in planned)} in {len(planned)} plans")
-        lines.append(f"median computer seconds timing a plan: trapezoid "
-                     f"{_median([r['trapezoid_timing_s'] for r in planned]):.3f} s, toppra "
-                     f"{_median([r['toppra_timing_s'] for r in planned]):.3f} s")
+            lines.append(
+                f"  {k:9s} trapezoid {_median([r['trapezoid_robot'][k] for r in planned]):6.1f} s  "
+                f"toppra {_median([r['toppra_robot'][k] for r in planned]):6.1f} s"
+            )
+        lines.append(
+            f"worst sample over all plans: velocity {max(r['toppra_max_v'] for r in planned):.4f} of its "
+            f"limit (trapezoid {max(r['trapezoid_max_v'] for r in planned):.4f}), acceleration "
+            f"{max(r['toppra_max_a'] for r in planned):.4f} (trapezoid "
+            f"{max(r['trapezoid_max_a'] for r in planned):.4f})"
+        )
+        lines.append(
+            f"re-check collisions of the toppra plans (PyBullet, 5 mm sweeps): "
+            f"{sum(int(r['recheck_collisions'] or 0) for r in planned)} in {len(planned)} plans"
+        )
+        lines.append(
+            f"median computer seconds timing a plan: trapezoid "
+            f"{_median([r['trapezoid_timing_s'] for r in planned]):.3f} s, toppra "
+            f"{_median([r['toppra_timing_s'] for r in planned]):.3f} s"
+        )
         stages: dict[str, list[float]] = {}
         for r in rows:
             for stage, s in r["computer_s"].items():
                 stages.setdefault(stage, []).append(s)
-        lines.append("median computer seconds per stage: " + ", ".join(
-            f"{k} {_median(v):.1f} (n={len(v)})" for k, v in stages.items()))
+        lines.append(
+            "median computer seconds per stage: "
+            + ", ".join(f"{k} {_median(v):.1f} (n={len(v)})" for k, v in stages.items())
+        )
     executed = [r for r in rows if r["executed"]]
     if executed:
         ok = sum(r["success"] for r in executed)
         timing = ", ".join(sorted({r.get("go_on", "toppra") for r in executed}))
-        lines.append(f"executed with {timing}: {ok} of {len(executed)} assembled; robot seconds executed "
-                     + ", ".join(f"seed {r['seed']} {r['robot_executed'].get('total', 0):.1f}" for r in executed))
+        lines.append(
+            f"executed with {timing}: {ok} of {len(executed)} assembled; robot seconds executed "
+            + ", ".join(f"seed {r['seed']} {r['robot_executed'].get('total', 0):.1f}" for r in executed)
+        )
     return "\n".join(lines)
 
 
@@ -176,8 +200,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=20, help="number of seeds (default 20)")
     ap.add_argument("--first-seed", type=int, default=1)
     ap.add_argument("--execute", type=int, default=0, help="execute the first K seeds too (toppra timing)")
-    ap.add_argument("--go-on", choices=TIMINGS, default="toppra",
-                    help="the timing of the plan the pipeline goes on with (executes, re-checks)")
+    ap.add_argument(
+        "--go-on",
+        choices=TIMINGS,
+        default="toppra",
+        help="the timing of the plan the pipeline goes on with (executes, re-checks)",
+    )
     ap.add_argument("--out", type=Path, default=None, help="folder for cycle_time.jsonl and the run folders")
     args = ap.parse_args(argv)
     out = args.out or Path(tempfile.mkdtemp(prefix="cycle_time_"))
@@ -206,8 +234,11 @@ def main(argv: list[str] | None = None) -> int:
             f.write(json.dumps(row) + "\n")
         new = row.get("toppra_robot", {}).get("total")
         old = row.get("trapezoid_robot", {}).get("total")
-        print(f"seed {seed}: {time.perf_counter() - t0:.0f} s wall; robot s {old} -> {new}; "
-              f"{'success' if row['success'] else row['failed_stage']}", flush=True)
+        print(
+            f"seed {seed}: {time.perf_counter() - t0:.0f} s wall; robot s {old} -> {new}; "
+            f"{'success' if row['success'] else row['failed_stage']}",
+            flush=True,
+        )
     print(report(rows))
     print(f"rows: {log}")
     return 0

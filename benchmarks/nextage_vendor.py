@@ -61,10 +61,24 @@ def _configs(ours: pin.Model, vendor: pin.Model, n: int, seed: int) -> tuple[np.
     """``n`` configurations of the 15 shared joints, as full q vectors of each model, uniform in both limits."""
     rng = np.random.default_rng(seed)
     names = [nm for nm in vendor.names[1:]]
-    lo = np.array([max(ours.lowerPositionLimit[ours.joints[ours.getJointId(nm)].idx_q],
-                       vendor.lowerPositionLimit[vendor.joints[vendor.getJointId(nm)].idx_q]) for nm in names])
-    hi = np.array([min(ours.upperPositionLimit[ours.joints[ours.getJointId(nm)].idx_q],
-                       vendor.upperPositionLimit[vendor.joints[vendor.getJointId(nm)].idx_q]) for nm in names])
+    lo = np.array(
+        [
+            max(
+                ours.lowerPositionLimit[ours.joints[ours.getJointId(nm)].idx_q],
+                vendor.lowerPositionLimit[vendor.joints[vendor.getJointId(nm)].idx_q],
+            )
+            for nm in names
+        ]
+    )
+    hi = np.array(
+        [
+            min(
+                ours.upperPositionLimit[ours.joints[ours.getJointId(nm)].idx_q],
+                vendor.upperPositionLimit[vendor.joints[vendor.getJointId(nm)].idx_q],
+            )
+            for nm in names
+        ]
+    )
     qs = rng.uniform(lo, hi, size=(n, len(names)))
     qo = np.zeros((n, ours.nq))
     qv = np.zeros((n, vendor.nq))
@@ -127,8 +141,10 @@ def _outside_distance(points: np.ndarray, prims: list[tuple[pin.GeometryObject, 
         if kind == "Box":
             q = np.abs(local) - np.asarray(g.halfSide)
         elif kind == "Cylinder":
-            q = np.stack([np.linalg.norm(local[:, :2], axis=1) - float(g.radius),
-                          np.abs(local[:, 2]) - float(g.halfLength)], axis=1)
+            q = np.stack(
+                [np.linalg.norm(local[:, :2], axis=1) - float(g.radius), np.abs(local[:, 2]) - float(g.halfLength)],
+                axis=1,
+            )
         else:
             raise ValueError(f"our model has a {kind}; only boxes and cylinders are expected")
         best = np.minimum(best, np.linalg.norm(np.maximum(q, 0.0), axis=1))
@@ -156,28 +172,54 @@ def compare(n: int, n_geom: int, n_samples: int, seed: int) -> dict[str, list[di
     fk_rows: list[dict[str, object]] = []
     for arm in ARMS:
         for label, frame, Ta, Tb in (
-            ("wrist", f"{arm}_JOINT5_Link", _frame_poses(mo, qo, [f"{arm}_JOINT5_Link"]),
-             _frame_poses(mv, qv, [f"{arm}_JOINT5_Link"])),
-            ("tcp", f"{arm}_TCP_Link", _frame_poses(mo, qo, [f"{arm}_TCP_Link"]),
-             _frame_poses(mg, qg, [f"{arm}_TCP_Link"])),
+            (
+                "wrist",
+                f"{arm}_JOINT5_Link",
+                _frame_poses(mo, qo, [f"{arm}_JOINT5_Link"]),
+                _frame_poses(mv, qv, [f"{arm}_JOINT5_Link"]),
+            ),
+            (
+                "tcp",
+                f"{arm}_TCP_Link",
+                _frame_poses(mo, qo, [f"{arm}_TCP_Link"]),
+                _frame_poses(mg, qg, [f"{arm}_TCP_Link"]),
+            ),
         ):
             dp = 1000.0 * np.linalg.norm(Ta[:, 0, :3, 3] - Tb[:, 0, :3, 3], axis=1)
             da = _angle_deg(Ta[:, 0], Tb[:, 0])
-            fk_rows.append({"frame": frame, "what": label, "configs": n, "pos_max_mm": float(dp.max()),
-                            "pos_median_mm": float(np.median(dp)), "ang_max_deg": float(da.max()),
-                            "ang_median_deg": float(np.median(da))})
+            fk_rows.append(
+                {
+                    "frame": frame,
+                    "what": label,
+                    "configs": n,
+                    "pos_max_mm": float(dp.max()),
+                    "pos_median_mm": float(np.median(dp)),
+                    "ang_max_deg": float(da.max()),
+                    "ang_median_deg": float(np.median(da)),
+                }
+            )
 
     # 2. joint limits
     lim_rows: list[dict[str, object]] = []
     for nm in names:
         jo, jv = mo.joints[mo.getJointId(nm)].idx_q, mv.joints[mv.getJointId(nm)].idx_q
-        lim_rows.append({
-            "joint": nm, "ours_lower": float(mo.lowerPositionLimit[jo]), "ours_upper": float(mo.upperPositionLimit[jo]),
-            "vendor_lower": float(mv.lowerPositionLimit[jv]), "vendor_upper": float(mv.upperPositionLimit[jv]),
-            "max_abs_diff_rad": float(max(abs(mo.lowerPositionLimit[jo] - mv.lowerPositionLimit[jv]),
-                                          abs(mo.upperPositionLimit[jo] - mv.upperPositionLimit[jv]))),
-            "ours_velocity": float(mo.velocityLimit[mo.joints[mo.getJointId(nm)].idx_v]),
-            "vendor_velocity": float(mv.velocityLimit[mv.joints[mv.getJointId(nm)].idx_v])})
+        lim_rows.append(
+            {
+                "joint": nm,
+                "ours_lower": float(mo.lowerPositionLimit[jo]),
+                "ours_upper": float(mo.upperPositionLimit[jo]),
+                "vendor_lower": float(mv.lowerPositionLimit[jv]),
+                "vendor_upper": float(mv.upperPositionLimit[jv]),
+                "max_abs_diff_rad": float(
+                    max(
+                        abs(mo.lowerPositionLimit[jo] - mv.lowerPositionLimit[jv]),
+                        abs(mo.upperPositionLimit[jo] - mv.upperPositionLimit[jv]),
+                    )
+                ),
+                "ours_velocity": float(mo.velocityLimit[mo.joints[mo.getJointId(nm)].idx_v]),
+                "vendor_velocity": float(mv.velocityLimit[mv.joints[mv.getJointId(nm)].idx_v]),
+            }
+        )
 
     # 3. collision geometry per link, placed by each model's FK
     # the vendor's link geometry as the vendor option uses it: *ARM_JOINT5_Link cut at the flange (the chuck
@@ -196,10 +238,18 @@ def compare(n: int, n_geom: int, n_samples: int, seed: int) -> dict[str, list[di
             pin.forwardKinematics(mo, do, qo[i])
             pin.forwardKinematics(mg, dv, qg[i])
             prims = [(m, do.oMi[j].homogeneous @ P, g) for m, j, P, g in lo_meshes[link]]
-            po = np.vstack([trimesh.transform_points(_samples(m, n_samples // len(prims), seed + k), T)
-                            for k, (m, T, _) in enumerate(prims)])
-            pv = np.vstack([trimesh.transform_points(_samples(m, n_samples, seed), dv.oMi[j].homogeneous @ P)
-                            for m, j, P, _ in lv_meshes[link]])
+            po = np.vstack(
+                [
+                    trimesh.transform_points(_samples(m, n_samples // len(prims), seed + k), T)
+                    for k, (m, T, _) in enumerate(prims)
+                ]
+            )
+            pv = np.vstack(
+                [
+                    trimesh.transform_points(_samples(m, n_samples, seed), dv.oMi[j].homogeneous @ P)
+                    for m, j, P, _ in lv_meshes[link]
+                ]
+            )
             a = cKDTree(po).query(pv)[0]  # vendor surface -> our surface
             b = cKDTree(pv).query(po)[0]  # our surface -> vendor surface
             out = _outside_distance(pv, [(g, T) for _, T, g in prims])  # exact, not sample-limited
@@ -208,13 +258,22 @@ def compare(n: int, n_geom: int, n_samples: int, seed: int) -> dict[str, list[di
             d_ov.append(b.max())
             outside_frac.append(float(np.mean(out > 1e-4)))
             outside_max.append(out.max())
-        link_rows.append({
-            "link": link, "ours_shapes": len(lo_meshes[link]), "ours_union_volume_l": 1000.0 * vo_union.volume,
-            "ours_hull_volume_l": 1000.0 * vo_union.convex_hull.volume,
-            "vendor_hull_volume_l": 1000.0 * vv.convex_hull.volume, "vendor_faces": len(vv.faces),
-            "hausdorff_mm": 1000.0 * max(hd), "vendor_to_ours_mm": 1000.0 * max(d_vo),
-            "ours_to_vendor_mm": 1000.0 * max(d_ov), "vendor_outside_ours_pct": 100.0 * max(outside_frac),
-            "vendor_outside_max_mm": 1000.0 * max(outside_max), "configs": min(n_geom, n)})
+        link_rows.append(
+            {
+                "link": link,
+                "ours_shapes": len(lo_meshes[link]),
+                "ours_union_volume_l": 1000.0 * vo_union.volume,
+                "ours_hull_volume_l": 1000.0 * vo_union.convex_hull.volume,
+                "vendor_hull_volume_l": 1000.0 * vv.convex_hull.volume,
+                "vendor_faces": len(vv.faces),
+                "hausdorff_mm": 1000.0 * max(hd),
+                "vendor_to_ours_mm": 1000.0 * max(d_vo),
+                "ours_to_vendor_mm": 1000.0 * max(d_ov),
+                "vendor_outside_ours_pct": 100.0 * max(outside_frac),
+                "vendor_outside_max_mm": 1000.0 * max(outside_max),
+                "configs": min(n_geom, n),
+            }
+        )
     return {"fk": fk_rows, "limits": lim_rows, "links": link_rows}
 
 
@@ -248,8 +307,11 @@ def main(argv: list[str] | None = None) -> int:
         warnings.simplefilter("ignore")  # the xacro lines' warning: expected for this file
         result = compare(args.n, args.configs, args.samples, args.seed)
     OUT.mkdir(parents=True, exist_ok=True)
-    for key, title in (("fk", "wrist and TCP poses"), ("limits", "joint limits (rad, rad/s)"),
-                       ("links", "collision geometry per link (volumes in litres, distances in mm)")):
+    for key, title in (
+        ("fk", "wrist and TCP poses"),
+        ("limits", "joint limits (rad, rad/s)"),
+        ("links", "collision geometry per link (volumes in litres, distances in mm)"),
+    ):
         _print(title, result[key])
         _write(result[key], OUT / f"nextage_vendor_{key}.csv")
     print(f"\nwrote {OUT}/nextage_vendor_{{fk,limits,links}}.csv")

@@ -46,8 +46,21 @@ from asmteach.core.rests.placements import plan_placements
 from asmteach.plugins.planners.placements.drop_test import down_normal, drop_test
 
 OUT = Path(__file__).resolve().parent / "out"
-COLUMNS = ["part", "family", "reported", "rests", "matched", "missed", "fragile", "below_margin", "spurious", "rolled",
-           "unsettled", "plan_s", "drop_s"]
+COLUMNS = [
+    "part",
+    "family",
+    "reported",
+    "rests",
+    "matched",
+    "missed",
+    "fragile",
+    "below_margin",
+    "spurious",
+    "rolled",
+    "unsettled",
+    "plan_s",
+    "drop_s",
+]
 
 
 def _uneven(mesh: trimesh.Trimesh, amplitude: float, *, seed: int) -> trimesh.Trimesh:
@@ -84,21 +97,33 @@ def main() -> None:
             t1 = time.perf_counter()
             normals = np.array([down_normal(p.T_table_part) for p in res.placements]).reshape(-1, 3)
             refused = np.array([r.normal for r in res.rejected]).reshape(-1, 3)
-            rep = drop_test(mesh, normals, res.center_of_mass, refused_normals=refused, drops=args.drops,
-                            seed=args.seed)
+            rep = drop_test(
+                mesh, normals, res.center_of_mass, refused_normals=refused, drops=args.drops, seed=args.seed
+            )
             t2 = time.perf_counter()
             row: dict[str, object] = dict(
-                part=part.name, family=part.family, reported=rep.reported, rests=rep.found, matched=rep.matched,
-                missed=rep.missed, fragile=rep.fragile, below_margin=rep.below_margin,
-                spurious=rep.spurious, rolled=rep.rolled_away,
-                unsettled=rep.unsettled, plan_s=round(t1 - t0, 3), drop_s=round(t2 - t1, 2),
+                part=part.name,
+                family=part.family,
+                reported=rep.reported,
+                rests=rep.found,
+                matched=rep.matched,
+                missed=rep.missed,
+                fragile=rep.fragile,
+                below_margin=rep.below_margin,
+                spurious=rep.spurious,
+                rolled=rep.rolled_away,
+                unsettled=rep.unsettled,
+                plan_s=round(t1 - t0, 3),
+                drop_s=round(t2 - t1, 2),
             )
             rows.append(row)
             print(" ".join(f"{row[c]!s:>12}" if i else f"{row[c]!s:<22}" for i, c in enumerate(COLUMNS)), flush=True)
     agree = sum(1 for r in rows if r["missed"] == 0 and r["spurious"] == 0)
     tot = {c: sum(int(r[c]) for r in rows) for c in COLUMNS[2:11]}
-    print(f"\n{len(rows)} parts; agreement (no missed rest, no spurious placement) on {agree}/{len(rows)}; totals: "
-          + ", ".join(f"{k} {v}" for k, v in tot.items()))
+    print(
+        f"\n{len(rows)} parts; agreement (no missed rest, no spurious placement) on {agree}/{len(rows)}; totals: "
+        + ", ".join(f"{k} {v}" for k, v in tot.items())
+    )
     OUT.mkdir(parents=True, exist_ok=True)
     tag = ("_cad" if args.cad else "") + (f"_uneven{args.uneven:g}" if args.uneven > 0.0 else "")
     out = OUT / f"placements_drop{tag}_seed{args.seed}.csv"

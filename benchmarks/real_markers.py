@@ -72,19 +72,26 @@ def calibration_table(data: Path) -> list[str]:
     named = load_named_frames(data / "real/chessboard")
     names, images = [n for n, _ in named], [i for _, i in named]
     rows = ["| | fx | fy | cx | cy | k1 | k2 | p1 | p2 | k3 | RMS px | views |", "|---" * 12 + "|"]
-    rows.append(f"| OpenCV reference (flags 2) | {K_ref[0, 0]:.2f} | {K_ref[1, 1]:.2f} | {K_ref[0, 2]:.2f} | "
-                f"{K_ref[1, 2]:.2f} | " + " | ".join(f"{x:.4f}" for x in d_ref) + f" | {rms_ref:.3f} | 13 |")
+    rows.append(
+        f"| OpenCV reference (flags 2) | {K_ref[0, 0]:.2f} | {K_ref[1, 1]:.2f} | {K_ref[0, 2]:.2f} | "
+        f"{K_ref[1, 2]:.2f} | " + " | ".join(f"{x:.4f}" for x in d_ref) + f" | {rms_ref:.3f} | 13 |"
+    )
     per_view = []
     for fix in (True, False):
         res = calibrate_chessboard(images, ChessboardSpec(cols=9, rows=6, square=0.025), names=names, fix_aspect=fix)
         K = res.camera.K
         label = "ours, --fix-aspect" if fix else "ours, fx fy free"
-        rows.append(f"| {label} | {K[0, 0]:.2f} | {K[1, 1]:.2f} | {K[0, 2]:.2f} | {K[1, 2]:.2f} | "
-                    + " | ".join(f"{x:.4f}" for x in res.camera.dist) + f" | {res.rms_px:.3f} | {res.images_used} |")
+        rows.append(
+            f"| {label} | {K[0, 0]:.2f} | {K[1, 1]:.2f} | {K[0, 2]:.2f} | {K[1, 2]:.2f} | "
+            + " | ".join(f"{x:.4f}" for x in res.camera.dist)
+            + f" | {res.rms_px:.3f} | {res.images_used} |"
+        )
         if fix:
             rel = (K[0, 0] / K_ref[0, 0] - 1) * 100
-            rows.append(f"| difference | {rel:+.3f} % | | {K[0, 2] - K_ref[0, 2]:+.2f} px | "
-                        f"{K[1, 2] - K_ref[1, 2]:+.2f} px | | | | | | {res.rms_px - rms_ref:+.3f} | |")
+            rows.append(
+                f"| difference | {rel:+.3f} % | | {K[0, 2] - K_ref[0, 2]:+.2f} px | "
+                f"{K[1, 2] - K_ref[1, 2]:+.2f} px | | | | | | {res.rms_px - rms_ref:+.3f} | |"
+            )
             per_view = list(zip(res.used, res.per_view_px, views_ref, strict=True))
     rows += ["", "| view | ours px | OpenCV px |", "|---|---|---|"]
     rows += [f"| {n} | {a:.3f} | {b:.3f} |" for n, a, b in per_view]
@@ -98,10 +105,12 @@ def marker_table(data: Path) -> list[str]:
         "teacher, default settings (noise-adaptive line-RMS limit)": lambda t: teacher_split(img, cam, t),
         "teacher, real-photo edge limits (0.35 px, 0.6)": lambda t: teacher_split(img, cam, t, REAL_PHOTO),
         "teacher, OpenCV sub-pixel corners": lambda t: teacher_split(
-            img, cam, t, ArucoTeacherSettings(corner_refinement="subpix")),
+            img, cam, t, ArucoTeacherSettings(corner_refinement="subpix")
+        ),
         "baseline: OpenCV corners + solvePnP per group": lambda t: solvepnp_split(img, cam, t),
         "baseline: OpenCV sub-pixel corners + solvePnP": lambda t: solvepnp_split(
-            img, cam, t, refine=cv2.aruco.CORNER_REFINE_SUBPIX),
+            img, cam, t, refine=cv2.aruco.CORNER_REFINE_SUBPIX
+        ),
     }
     rows = ["| method | " + " | ".join(SPLITS) + " | mean |", "|---" * (len(SPLITS) + 2) + "|"]
     tasks = split_tasks()
@@ -112,18 +121,24 @@ def marker_table(data: Path) -> list[str]:
             err = est.errors(T_true)
             e_t, e_r = err.position_mm, err.angle_deg
             errs.append((e_t, e_r))
-            cells.append(f"{e_t:.2f} mm {e_r:.2f} deg ({len(est.markers_a)}+{len(est.markers_b)} markers, "
-                         f"{est.rms_px:.2f} px)")
+            cells.append(
+                f"{e_t:.2f} mm {e_r:.2f} deg ({len(est.markers_a)}+{len(est.markers_b)} markers, {est.rms_px:.2f} px)"
+            )
         m = np.mean(errs, axis=0)
         rows.append(f"| {label} | " + " | ".join(cells) + f" | {m[0]:.2f} mm {m[1]:.2f} deg |")
     return rows
 
 
 def ids_table(data: Path) -> list[str]:
-    rows = ["| photo | dictionary | ids found (teacher's detector, default / real-photo edge limits) |",
-            "|---|---|---|"]
-    for photo, dictionary in (("choriginal.jpg", DICT), ("singlemarkersoriginal.jpg", DICT),
-                              ("screen_charuco.jpg", "DICT_4X4_50")):
+    rows = [
+        "| photo | dictionary | ids found (teacher's detector, default / real-photo edge limits) |",
+        "|---|---|---|",
+    ]
+    for photo, dictionary in (
+        ("choriginal.jpg", DICT),
+        ("singlemarkersoriginal.jpg", DICT),
+        ("screen_charuco.jpg", "DICT_4X4_50"),
+    ):
         img = cv2.imread(str(data / "real/aruco" / photo))
         found = []
         for lim in ((0.25, 0.85), (0.35, 0.6)):
@@ -137,9 +152,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", type=Path, default=ROOT / ".." / "shared" / "data", help="the shared data folder")
     args = ap.parse_args()
-    for title, rows in (("Chessboard calibration", calibration_table(args.data)),
-                        ("T_A_B error of marker groups on choriginal.jpg", marker_table(args.data)),
-                        ("Ids", ids_table(args.data))):
+    for title, rows in (
+        ("Chessboard calibration", calibration_table(args.data)),
+        ("T_A_B error of marker groups on choriginal.jpg", marker_table(args.data)),
+        ("Ids", ids_table(args.data)),
+    ):
         print(f"## {title}\n")
         print("\n".join(rows) + "\n")
 

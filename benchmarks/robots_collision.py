@@ -35,23 +35,29 @@ def main() -> None:
     T_a, T_b = np.eye(4), np.eye(4)
     T_a[:3, 3] = [0.40, 0.15, 0.025]
     T_b[:3, 3] = [0.45, -0.15, 0.03]
-    robot.set_obstacles([Obstacle("cube", trimesh.creation.box((0.05, 0.05, 0.05)), T_a),
-                         Obstacle("cylinder", trimesh.creation.cylinder(0.03, 0.06, sections=32), T_b)])
+    robot.set_obstacles(
+        [
+            Obstacle("cube", trimesh.creation.box((0.05, 0.05, 0.05)), T_a),
+            Obstacle("cylinder", trimesh.creation.cylinder(0.03, 0.06, sections=32), T_b),
+        ]
+    )
     rng = np.random.default_rng(args.seed)
     for arm in robot.arms:
         lo, hi = robot.joint_limits(arm)
         qs = rng.uniform(lo, hi, size=(args.n, len(lo)))
         robot.in_collision(arm, qs[:10])  # warm-up: builds the pair tables
         c0, w0 = time.process_time(), time.perf_counter()
-        hits = np.concatenate([robot.in_collision(arm, qs[i:i + args.batch]) for i in range(0, args.n, args.batch)])
+        hits = np.concatenate([robot.in_collision(arm, qs[i : i + args.batch]) for i in range(0, args.n, args.batch)])
         cpu, wall = time.process_time() - c0, time.perf_counter() - w0
         m = 500
         c1 = time.process_time()
         robot.clearance(arm, qs[:m])
         ccpu = time.process_time() - c1
-        print(f"{arm} arm: {args.n} configurations, {100 * hits.mean():.1f} % in collision; "
-              f"{args.n / cpu:,.0f} configs/s (CPU time, one core), {args.n / wall:,.0f} configs/s (wall); "
-              f"clearance {m / ccpu:,.0f} configs/s")
+        print(
+            f"{arm} arm: {args.n} configurations, {100 * hits.mean():.1f} % in collision; "
+            f"{args.n / cpu:,.0f} configs/s (CPU time, one core), {args.n / wall:,.0f} configs/s (wall); "
+            f"clearance {m / ccpu:,.0f} configs/s"
+        )
     robot.close()
 
 

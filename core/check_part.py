@@ -82,12 +82,15 @@ def _guess_units(path: Path) -> tuple[str, float]:
 def _symmetry_text(count: int) -> str:
     if count == 1:
         return "no symmetry: every pose of the part is distinct"
-    return (f"{count} proper rotations map the part onto itself; poses that differ by one are the same answer "
-            "in detection, correction and every error figure")
+    return (
+        f"{count} proper rotations map the part onto itself; poses that differ by one are the same answer "
+        "in detection, correction and every error figure"
+    )
 
 
-def check_part(path: str | Path, *, units: str | None = None, out_dir: Path | None = None,
-               pm: Any = None) -> list[CheckLine]:
+def check_part(
+    path: str | Path, *, units: str | None = None, out_dir: Path | None = None, pm: Any = None
+) -> list[CheckLine]:
     """Findings about the mesh file ``path`` (``units`` ``"m"``/``"mm"``, guessed when ``None``).
 
     ``out_dir`` receives pictures (the placements' contact sheet); ``pm`` is
@@ -105,9 +108,14 @@ def check_part(path: str | Path, *, units: str | None = None, out_dir: Path | No
     lines: list[CheckLine] = []
     if units is None:
         units, extent = _guess_units(path)
-        lines.append(CheckLine("units", "warn" if units == "mm" else "ok",
-                               f"guessed {units}: the largest extent is {extent:.4g} file units "
-                               f"(pass --units m|mm to say so; parts are 2 mm to 2 m)"))
+        lines.append(
+            CheckLine(
+                "units",
+                "warn" if units == "mm" else "ok",
+                f"guessed {units}: the largest extent is {extent:.4g} file units "
+                f"(pass --units m|mm to say so; parts are 2 mm to 2 m)",
+            )
+        )
     else:
         lines.append(CheckLine("units", "ok", f"{units}, as given"))
     with _warnings_of("asmteach.core.parts") as repairs:
@@ -116,19 +124,28 @@ def check_part(path: str | Path, *, units: str | None = None, out_dir: Path | No
     if not repairs:
         lines.append(CheckLine("repair", "ok", "the mesh is closed and consistently wound; nothing changed"))
     ext = np.asarray(part.mesh.extents) * 1000.0
-    lines.append(CheckLine("mass", "ok", f"{ext[0]:.1f} x {ext[1]:.1f} x {ext[2]:.1f} mm, volume "
-                                         f"{part.mesh.volume * 1e6:.2f} cm3, mass {part.mass * 1000:.1f} g "
-                                         f"(set mass or density in a part YAML if the material differs)"))
+    lines.append(
+        CheckLine(
+            "mass",
+            "ok",
+            f"{ext[0]:.1f} x {ext[1]:.1f} x {ext[2]:.1f} mm, volume "
+            f"{part.mesh.volume * 1e6:.2f} cm3, mass {part.mass * 1000:.1f} g "
+            f"(set mass or density in a part YAML if the material differs)",
+        )
+    )
     syms = part_symmetries(part.mesh, np.asarray(part.center_of_mass, dtype=float))
     lines.append(CheckLine("symmetry", "ok", _symmetry_text(len(syms))))
     dec = decompose(part)
     level: Level = "ok" if dec.protrusion <= 1e-4 else "warn"
-    lines.append(CheckLine(
-        "collision", level,
-        f"{len(dec.pieces)} convex pieces ({dec.method}): Hausdorff {dec.hausdorff * 1000:.3f} mm, "
-        f"protrusion {dec.protrusion * 1000:.3f} mm, volume error {dec.volume_error * 100:.2f} %"
-        + ("" if level == "ok" else "; clearances below the protrusion will close in simulation"),
-    ))
+    lines.append(
+        CheckLine(
+            "collision",
+            level,
+            f"{len(dec.pieces)} convex pieces ({dec.method}): Hausdorff {dec.hausdorff * 1000:.3f} mm, "
+            f"protrusion {dec.protrusion * 1000:.3f} mm, volume error {dec.volume_error * 100:.2f} %"
+            + ("" if level == "ok" else "; clearances below the protrusion will close in simulation"),
+        )
+    )
     if pm is not None:
         for found in pm.hook.asmteach_check_part(part=part, out_dir=out_dir):
             lines += [CheckLine(*row) for row in found]
@@ -147,15 +164,20 @@ def _cmd_check_part(args: argparse.Namespace) -> int:
     for line in lines:
         print(f"{mark[line.level]} {line.stage:<10} {line.text}")
     failed = [line for line in lines if line.level == "fail"]
-    print(f"{Path(args.mesh).name}: {len(failed)} stage(s) will fail" if failed
-          else f"{Path(args.mesh).name}: every stage can use this part")
+    print(
+        f"{Path(args.mesh).name}: {len(failed)} stage(s) will fail"
+        if failed
+        else f"{Path(args.mesh).name}: every stage can use this part"
+    )
     return 1 if failed else 0
 
 
 def add_check_part_command(sub: argparse._SubParsersAction, pm: Any) -> None:
     """Register ``check-part`` on the CLI's sub-parsers."""
-    p = sub.add_parser("check-part", help="what each stage will do with one part: units, repairs, symmetry, "
-                                          "collision pieces, placements, grasps")
+    p = sub.add_parser(
+        "check-part",
+        help="what each stage will do with one part: units, repairs, symmetry, collision pieces, placements, grasps",
+    )
     p.add_argument("mesh", help="STL/OBJ/PLY/OFF mesh file")
     p.add_argument("--units", choices=("m", "mm"), default=None, help="mesh units (default: guessed from its size)")
     p.add_argument("--out", default=None, help="folder for pictures (placements contact sheet)")

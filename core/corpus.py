@@ -78,8 +78,9 @@ class CorpusPart:
 _SECTIONS = 64
 
 
-def _box(size: tuple[float, float, float], at: tuple[float, float, float] = (0, 0, 0),
-         rot: np.ndarray | None = None) -> trimesh.Trimesh:
+def _box(
+    size: tuple[float, float, float], at: tuple[float, float, float] = (0, 0, 0), rot: np.ndarray | None = None
+) -> trimesh.Trimesh:
     m = trimesh.creation.box(extents=size)
     if rot is not None:
         m.apply_transform(rot)
@@ -87,8 +88,9 @@ def _box(size: tuple[float, float, float], at: tuple[float, float, float] = (0, 
     return m
 
 
-def _cyl(r: float, h: float, at: tuple[float, float, float] = (0, 0, 0), axis: str = "z",
-         sections: int = _SECTIONS) -> trimesh.Trimesh:
+def _cyl(
+    r: float, h: float, at: tuple[float, float, float] = (0, 0, 0), axis: str = "z", sections: int = _SECTIONS
+) -> trimesh.Trimesh:
     m = trimesh.creation.cylinder(radius=r, height=h, sections=sections)
     if axis == "x":
         m.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [0, 1, 0]))

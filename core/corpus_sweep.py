@@ -84,8 +84,10 @@ class PartCorpus(Experiment):
             family, _, index = name.rpartition("_")
             known = family in corpus._CSG and index.isdigit()
         if not known:
-            raise UserError(f"params.part: no corpus part {name!r}; give '<family>_<index>' (families: "
-                            f"{', '.join(corpus.FAMILIES)}) or 'ff_<mesh stem>'")
+            raise UserError(
+                f"params.part: no corpus part {name!r}; give '<family>_<index>' (families: "
+                f"{', '.join(corpus.FAMILIES)}) or 'ff_<mesh stem>'"
+            )
 
     def run_trial(self, params: PartCorpusParams, seed: int, workdir: Path) -> dict[str, Any]:
         from asmteach.core.convex_pieces import decompose
@@ -98,8 +100,7 @@ class PartCorpus(Experiment):
             source = corpus_part(params.part, params.corpus_seed)
         except ValueError as exc:
             raise UserError(f"part: {exc}") from None
-        stl = write_cad_stl(source.mesh, Path(workdir) / f"{params.part}.stl", open_faces=params.open_faces,
-                            seed=seed)
+        stl = write_cad_stl(source.mesh, Path(workdir) / f"{params.part}.stl", open_faces=params.open_faces, seed=seed)
         part = build_part(PartSpec(name=params.part, mesh=str(stl), mesh_units="mm"))
         base: dict[str, Any] = {"part": params.part, "family": source.family, "stage": params.stage}
         t0 = time.perf_counter()
@@ -117,8 +118,9 @@ class PartCorpus(Experiment):
             }
         else:
             pm = make_plugin_manager(progress=False)
-            metrics = pm.hook.asmteach_measure_part(part=part, stage=params.stage, seed=seed, workdir=Path(workdir),
-                                                    options={"scenes": params.scenes})
+            metrics = pm.hook.asmteach_measure_part(
+                part=part, stage=params.stage, seed=seed, workdir=Path(workdir), options={"scenes": params.scenes}
+            )
             if metrics is None:
                 raise UserError(f"no installed plugin measures the {params.stage!r} stage (asmteach_measure_part)")
         out = {**base, **metrics, "stage_seconds": time.perf_counter() - t0}
@@ -147,18 +149,27 @@ class PartCorpus(Experiment):
                 line = f"- **{s}**: {sum(m['passed'] for m in ms)}/{len(ms)} parts pass"
                 if s == "detection":
                     ok_scenes, scenes = sum(m["success"] for m in ms), sum(m["scenes"] for m in ms)
-                    line += (f"; {ok_scenes}/{scenes} scenes found within 5 mm / 5 deg "
-                             f"({100 * ok_scenes / max(scenes, 1):.1f} %), "
-                             f"{sum(m['wrong_found'] for m in ms)} wrong poses reported as found")
+                    line += (
+                        f"; {ok_scenes}/{scenes} scenes found within 5 mm / 5 deg "
+                        f"({100 * ok_scenes / max(scenes, 1):.1f} %), "
+                        f"{sum(m['wrong_found'] for m in ms)} wrong poses reported as found"
+                    )
                 if s == "grasps":
                     fit = [m for m in ms if m["fits_hand"]]
                     line += f"; {sum(m['holding'] >= 30 for m in fit)}/{len(fit)} parts that fit the hand hold >= 30"
                 totals.append(line)
-        crashed = [f"- {r['point']}: {str(r.get('error', '')).splitlines()[0] if r.get('error') else 'failed'}"
-                   for r in failed]
-        md = ("# part_corpus\n\n" + "\n".join(totals) + "\n\n"
-              + (("Trials that raised:\n\n" + "\n".join(crashed) + "\n\n") if crashed else "")
-              + header + "\n".join(body) + "\n")
+        crashed = [
+            f"- {r['point']}: {str(r.get('error', '')).splitlines()[0] if r.get('error') else 'failed'}" for r in failed
+        ]
+        md = (
+            "# part_corpus\n\n"
+            + "\n".join(totals)
+            + "\n\n"
+            + (("Trials that raised:\n\n" + "\n".join(crashed) + "\n\n") if crashed else "")
+            + header
+            + "\n".join(body)
+            + "\n"
+        )
         paths = [write_text(out_dir / "part_corpus.md", md)]
         paths.append(_plot(ok, stages, out_dir / "part_corpus.png"))
         return paths
@@ -190,8 +201,9 @@ def _plot(ok: list[dict[str, Any]], stages: tuple[str, ...], path: Path) -> Path
     ax = fig.add_subplot(111)
     width = 0.8 / len(stages)
     for i, s in enumerate(stages):
-        rate = [np.mean([m["passed"] for m in ok if m["stage"] == s and m["family"] == f] or [np.nan])
-                for f in families]
+        rate = [
+            np.mean([m["passed"] for m in ok if m["stage"] == s and m["family"] == f] or [np.nan]) for f in families
+        ]
         ax.bar(np.arange(len(families)) + i * width, rate, width, label=s)
     ax.set_xticks(np.arange(len(families)) + 0.4 - width / 2, families, rotation=40, ha="right")
     ax.set_ylabel("parts that meet the target")

@@ -29,16 +29,24 @@ __all__ = ["EndToEnd", "report_row", "run_config_trial"]
 
 class EndToEndParams(StrictModel):
     run_config: str = Field(description="run config YAML, relative to the experiment file")
-    overrides: dict[str, Any] = Field(default_factory=lambda: {"execution.animation": False},
-                                      description="dotted config keys set for every trial (as asmteach run --set)")
+    overrides: dict[str, Any] = Field(
+        default_factory=lambda: {"execution.animation": False},
+        description="dotted config keys set for every trial (as asmteach run --set)",
+    )
 
 
 class EndToEnd(Experiment):
     """Success rate and achieved assembly error of whole runs."""
 
     Params = EndToEndParams
-    plot_metrics = ("success", "achieved_vs_taught_mm", "achieved_vs_taught_deg", "a_goal_error_mm",
-                    "plan_seconds", "robot_seconds")  # six at most: the computer's planning clock, the robot's clock
+    plot_metrics = (
+        "success",
+        "achieved_vs_taught_mm",
+        "achieved_vs_taught_deg",
+        "a_goal_error_mm",
+        "plan_seconds",
+        "robot_seconds",
+    )  # six at most: the computer's planning clock, the robot's clock
 
     def check(self, params: EndToEndParams) -> None:
         """The run config with the overrides, loaded as a trial loads it: a misspelt key fails before any trial."""
@@ -49,8 +57,9 @@ class EndToEnd(Experiment):
         return row
 
 
-def run_config_trial(run_config: Path, overrides: dict[str, Any], seed: int,
-                     workdir: Path) -> tuple[RunReport, dict[str, Any]]:
+def run_config_trial(
+    run_config: Path, overrides: dict[str, Any], seed: int, workdir: Path
+) -> tuple[RunReport, dict[str, Any]]:
     """Run the whole pipeline of ``run_config`` with ``seed`` into ``workdir/run``; return the report and its row.
 
     ``overrides``: dotted config keys set before validation (as ``asmteach run --set``); the seed is set last.
@@ -66,8 +75,12 @@ def run_config_trial(run_config: Path, overrides: dict[str, Any], seed: int,
 def report_row(report: RunReport) -> dict[str, Any]:
     """A run report as one flat sweep row: outcome (with the failure's cause,
     :class:`~asmteach.core.failures.FailureCause`), errors (mm, deg), computer seconds per stage, robot seconds."""
-    row: dict[str, Any] = {"success": bool(report.success), "failed_stage": report.failed_stage or "",
-                           "failure_cause": str(report.failure_cause or ""), "reason": report.reason or ""}
+    row: dict[str, Any] = {
+        "success": bool(report.success),
+        "failed_stage": report.failed_stage or "",
+        "failure_cause": str(report.failure_cause or ""),
+        "reason": report.reason or "",
+    }
     for key in ("achieved_vs_taught_mm", "achieved_vs_taught_deg", "a_goal_error_mm", "plan_recheck_collisions"):
         if key in report.metrics:
             row[key] = report.metrics[key]
@@ -77,8 +90,10 @@ def report_row(report: RunReport) -> dict[str, Any]:
     # own with the timing used and with the trapezoid on the same paths (issue 27)
     for kind, seconds in report.robot_seconds.items():
         row["robot_seconds" if kind == "total" else f"robot_{kind}_seconds"] = seconds
-    for key, name in (("robot_seconds", "plan_robot_seconds"),
-                      ("robot_seconds_trapezoid", "plan_robot_seconds_trapezoid")):
+    for key, name in (
+        ("robot_seconds", "plan_robot_seconds"),
+        ("robot_seconds_trapezoid", "plan_robot_seconds_trapezoid"),
+    ):
         planned = report.plan_stats.get(key)
         if isinstance(planned, dict) and "total" in planned:
             row[name] = planned["total"]

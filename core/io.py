@@ -142,8 +142,14 @@ def pid_alive(pid: int) -> bool:
 
 
 @contextlib.contextmanager
-def run_folder(out: str | os.PathLike[str], name: str, *, force: bool = False, marker: str = RUN_MARKER,
-               key: tuple[str, ...] = ("config", "name")) -> Iterator[Path]:
+def run_folder(
+    out: str | os.PathLike[str],
+    name: str,
+    *,
+    force: bool = False,
+    marker: str = RUN_MARKER,
+    key: tuple[str, ...] = ("config", "name"),
+) -> Iterator[Path]:
     """A fresh folder to write a run named ``name`` into; its files replace ``out``'s when the block ends.
 
     Nothing lost, nothing mixed: the run writes into a hidden staging folder
@@ -163,11 +169,15 @@ def run_folder(out: str | os.PathLike[str], name: str, *, force: bool = False, m
     owner = _owner(target, marker, key)
     if owner == "":
         # Never replaced, not even with --force: they may be anything (--out . in a project folder).
-        raise UserError(f"--out {target}: holds files that are not a run's results (no readable {marker}); give "
-                        "an empty or new folder")
+        raise UserError(
+            f"--out {target}: holds files that are not a run's results (no readable {marker}); give "
+            "an empty or new folder"
+        )
     if owner is not None and owner != name and not force:
-        raise UserError(f"--out {target}: holds the results of run {owner!r}; give an empty or new folder, or add "
-                        "--force to replace them")
+        raise UserError(
+            f"--out {target}: holds the results of run {owner!r}; give an empty or new folder, or add "
+            "--force to replace them"
+        )
     stage = target / f".partial-{os.getpid()}"
     shutil.rmtree(stage, ignore_errors=True)
     stage.mkdir()
@@ -262,7 +272,7 @@ def append_jsonl(path: str | os.PathLike[str], record: dict[str, Any]) -> None:
             line = "\n" + line
         data = line.encode("utf-8")
         while data:  # os.write may write part of it; the rest follows (or an OSError says why not)
-            data = data[os.write(fd, data):]
+            data = data[os.write(fd, data) :]
         os.fsync(fd)
     finally:
         os.close(fd)

@@ -178,8 +178,15 @@ def build_cloud_part(spec: PartSpec, path: Path) -> PartModel:
     com = np.asarray(spec.center_of_mass if spec.center_of_mass is not None else hull.center_mass, dtype=float)
     for note in cloud.notes:
         log.warning("%s: %s", path.name, note)
-    return PartModel(spec=spec, mesh=hull, mass=float(mass), center_of_mass=com, source_hash=f"scan-{h}",
-                     points=pts, scan_viewpoint=eye)
+    return PartModel(
+        spec=spec,
+        mesh=hull,
+        mass=float(mass),
+        center_of_mass=com,
+        source_hash=f"scan-{h}",
+        points=pts,
+        scan_viewpoint=eye,
+    )
 
 
 def build_part(spec: PartSpec, base_dir: Path | None = None, *, scans: bool = False) -> PartModel:

@@ -78,9 +78,15 @@ def detection_figure(
         if det is not None and det.best is not None:
             err = det.details.get("corrected_error") or det.details.get("rough_error") or {}
             c = det.best[:2, 3] * 1000.0
-            ax1.annotate(f"{part.name}\n{err.get('position_mm', float('nan')):.2f} mm, "
-                         f"{err.get('angle_deg', float('nan')):.2f} deg", c, fontsize=8, ha="center",
-                         xytext=(0, 28), textcoords="offset points")
+            ax1.annotate(
+                f"{part.name}\n{err.get('position_mm', float('nan')):.2f} mm, "
+                f"{err.get('angle_deg', float('nan')):.2f} deg",
+                c,
+                fontsize=8,
+                ha="center",
+                xytext=(0, 28),
+                textcoords="offset points",
+            )
     ax1.set_aspect("equal")
     ax1.set_xlabel("world x (mm)")
     ax1.set_ylabel("world y (mm)")
@@ -104,11 +110,14 @@ def metrics_figure(path: Path, report: RunReport) -> Path:
         ax.set_yticklabels([n.removesuffix(f"_{unit}").replace("_", " ") for n in names], fontsize=8)
         ax.set_xlabel(unit)
         for i, k in enumerate(names):
-            ax.annotate(f"{data[k]:.3f}", (data[k], i), xytext=(3, 0), textcoords="offset points", va="center",
-                        fontsize=8)
+            ax.annotate(
+                f"{data[k]:.3f}", (data[k], i), xytext=(3, 0), textcoords="offset points", va="center", fontsize=8
+            )
     axes[0].set_title("position errors")
     axes[1].set_title("angle errors")
-    fig.suptitle(f"{report.config.get('name', 'run')} (seed {report.seed}): "
-                 f"{'success' if report.success else 'failed at ' + str(report.failed_stage)}")
+    fig.suptitle(
+        f"{report.config.get('name', 'run')} (seed {report.seed}): "
+        f"{'success' if report.success else 'failed at ' + str(report.failed_stage)}"
+    )
     fig.tight_layout()
     return _save(fig, path)

@@ -112,22 +112,25 @@ def find_package(name: str, package_paths: Sequence[str | Path] = (), start: Pat
             tried.append(str(cand))
             if package_name(cand) == name:
                 return cand
-    raise UserError(f"package {name!r} not found (no package.xml naming it in {', '.join(tried) or 'nothing'}); "
-                    "add its folder to package_paths")
+    raise UserError(
+        f"package {name!r} not found (no package.xml naming it in {', '.join(tried) or 'nothing'}); "
+        "add its folder to package_paths"
+    )
 
 
-def resolve_uri(uri: str, base_dir: Path, package_paths: Sequence[str | Path] = (),
-                packages: dict[str, Path] | None = None) -> Path:
+def resolve_uri(
+    uri: str, base_dir: Path, package_paths: Sequence[str | Path] = (), packages: dict[str, Path] | None = None
+) -> Path:
     """File named by a URDF ``filename``: ``package://NAME/rel``, ``file://abs`` or a path relative to ``base_dir``."""
     if uri.startswith("package://"):
-        rest = uri[len("package://"):]
+        rest = uri[len("package://") :]
         name, _, rel = rest.partition("/")
         cache = packages if packages is not None else {}
         if name not in cache:
             cache[name] = find_package(name, package_paths, base_dir)
         return cache[name] / rel
     if uri.startswith("file://"):
-        uri = uri[len("file://"):]
+        uri = uri[len("file://") :]
     p = Path(uri).expanduser()
     return p if p.is_absolute() else base_dir / p
 
@@ -140,7 +143,7 @@ def strip_xacro(root: ET.Element) -> list[str]:
         for child in list(parent):
             if isinstance(child.tag, str) and child.tag.startswith(prefix):
                 parent.remove(child)
-                removed.append("xacro:" + child.tag[len(prefix):])
+                removed.append("xacro:" + child.tag[len(prefix) :])
     return removed
 
 
@@ -168,8 +171,9 @@ def _convert_mesh(src: Path, dst: Path) -> None:
     tmp.replace(dst)  # atomic: two processes converting the same file do not see half a file
 
 
-def resolve_urdf(urdf: str | Path, package_paths: Sequence[str | Path] = (), *,
-                 out_dir: str | Path | None = None) -> ResolvedUrdf:
+def resolve_urdf(
+    urdf: str | Path, package_paths: Sequence[str | Path] = (), *, out_dir: str | Path | None = None
+) -> ResolvedUrdf:
     """Write a resolved copy of ``urdf`` (see the module doc) and return where it is.
 
     ``out_dir`` defaults to a cache folder (``$ASMTEACH_URDF_CACHE`` or the
@@ -187,8 +191,11 @@ def resolve_urdf(urdf: str | Path, package_paths: Sequence[str | Path] = (), *,
     stripped = strip_xacro(root)
     if stripped:
         kinds = sorted(set(stripped))
-        warnings.warn(f"{src.name}: removed {len(stripped)} xacro element(s) ({', '.join(kinds)}); a URDF reader "
-                      "cannot expand them (run xacro first if links or joints come from macros)", stacklevel=2)
+        warnings.warn(
+            f"{src.name}: removed {len(stripped)} xacro element(s) ({', '.join(kinds)}); a URDF reader "
+            "cannot expand them (run xacro first if links or joints come from macros)",
+            stacklevel=2,
+        )
     packages: dict[str, Path] = {}
     mesh_elems = [e for e in root.iter("mesh") if e.get("filename")]
     sources: dict[str, Path] = {}

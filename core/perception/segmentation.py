@@ -320,9 +320,7 @@ def above_mask(
     return (h > low) & (h < settings.max_height)
 
 
-def _local_table(
-    points: np.ndarray, h: np.ndarray, on_table: np.ndarray, table: TablePlane, cell: float
-) -> np.ndarray:
+def _local_table(points: np.ndarray, h: np.ndarray, on_table: np.ndarray, table: TablePlane, cell: float) -> np.ndarray:
     """Per point the height of the table around it above the fitted plane (metres).
 
     The table's points are binned in ``cell``-sized squares of the plane; a point's local table is the

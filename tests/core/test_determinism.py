@@ -28,15 +28,19 @@ DEMO = ROOT / "configs/demo.yaml"
 # The animation only adds GIF frames (not in either JSON) and a minute of rendering.
 ARGS = ["--set", "execution.animation=false"]
 
-TIMING_KEYS = frozenset({
-    "seconds",  # a stage's wall time; a transfer's total
-    "planning_seconds",  # the plan stage's wall time (report and plan stats)
-    "graph_seconds", "search_seconds", "motion_seconds",  # the regrasp planner's wall time per phase
-    "timing_seconds",  # wall time of the time parametrisation
-    "timing_ms",  # a detection's wall (and CPU) time per step
-    "view_db_built_ms",  # wall time of building a view database, 0.0 when it came from the disk cache
-    "computer_seconds",  # the report's wall time per stage
-})
+TIMING_KEYS = frozenset(
+    {
+        "seconds",  # a stage's wall time; a transfer's total
+        "planning_seconds",  # the plan stage's wall time (report and plan stats)
+        "graph_seconds",
+        "search_seconds",
+        "motion_seconds",  # the regrasp planner's wall time per phase
+        "timing_seconds",  # wall time of the time parametrisation
+        "timing_ms",  # a detection's wall (and CPU) time per step
+        "view_db_built_ms",  # wall time of building a view database, 0.0 when it came from the disk cache
+        "computer_seconds",  # the report's wall time per stage
+    }
+)
 """Keys whose whole value is a wall-clock measurement. Not exempt, because they are computed, not measured:
 ``execution_seconds``, ``robot_seconds`` (the robot's simulated motion time) and trajectory ``times``."""
 
@@ -82,8 +86,15 @@ def test_the_demo_gives_the_same_report_and_plan_in_this_process_and_in_another(
     hash_seed = str(int(os.environ.get("PYTHONHASHSEED", "0") or 0) + 1)
     env = {**os.environ, "PYTHONHASHSEED": hash_seed}
     code = "import sys; from asmteach.core.cli import main; sys.exit(main(sys.argv[1:]))"
-    proc = subprocess.run([sys.executable, "-c", code, "run", str(DEMO), "--out", str(there), *ARGS],
-                          env=env, cwd=tmp_path, check=False, capture_output=True, text=True, timeout=1800)
+    proc = subprocess.run(
+        [sys.executable, "-c", code, "run", str(DEMO), "--out", str(there), *ARGS],
+        env=env,
+        cwd=tmp_path,
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=1800,
+    )
     assert (there / "plan.json").is_file(), proc.stderr[-2000:]
     report = _load(here, "report.json")
     assert report["stages"] and all(s["ok"] for s in report["stages"]), report["reason"]

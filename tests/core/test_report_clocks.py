@@ -19,18 +19,23 @@ ROOT = Path(__file__).resolve().parents[2]
 PLAN_STATS = {
     "timing": "toppra",
     "robot_seconds": {"total": 50.0, "transit": 20.0, "approach": 5.0, "insertion": 2.0, "regrasp": 23.0},
-    "robot_seconds_trapezoid": {"total": 120.0, "transit": 30.0, "approach": 22.0, "insertion": 2.3,
-                                "regrasp": 65.7},
+    "robot_seconds_trapezoid": {"total": 120.0, "transit": 30.0, "approach": 22.0, "insertion": 2.3, "regrasp": 65.7},
 }
 
 
 def _report(**kw) -> RunReport:
-    fields = dict(config={"name": "clocks"}, seed=4, success=True,
-                  stages=[StageOutcome(stage="plan", ok=True, seconds=30.5),
-                          StageOutcome(stage="execute", ok=True, seconds=40.25)],
-                  plan_stats=PLAN_STATS,
-                  robot_seconds={"total": 49.5, "transit": 20.0, "approach": 5.0, "insertion": 2.0, "regrasp": 22.5},
-                  computer_seconds={"plan": 30.5, "execute": 40.25, "total": 70.75})
+    fields = dict(
+        config={"name": "clocks"},
+        seed=4,
+        success=True,
+        stages=[
+            StageOutcome(stage="plan", ok=True, seconds=30.5),
+            StageOutcome(stage="execute", ok=True, seconds=40.25),
+        ],
+        plan_stats=PLAN_STATS,
+        robot_seconds={"total": 49.5, "transit": 20.0, "approach": 5.0, "insertion": 2.0, "regrasp": 22.5},
+        computer_seconds={"plan": 30.5, "execute": 40.25, "total": 70.75},
+    )
     fields.update(kw)
     return RunReport(**fields)
 
@@ -60,8 +65,9 @@ def test_html_and_summary_show_both_clocks() -> None:
 
 
 def test_end_to_end_rows_carry_both_clocks(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    (tmp_path / "run.yaml").write_text(yaml.safe_dump(
-        {"name": "t", "seed": 1, "structure": str(ROOT / "configs/parts/set1/peg_in_hole.yaml")}))
+    (tmp_path / "run.yaml").write_text(
+        yaml.safe_dump({"name": "t", "seed": 1, "structure": str(ROOT / "configs/parts/set1/peg_in_hole.yaml")})
+    )
     monkeypatch.setattr(pipeline, "run_pipeline", lambda cfg, out_dir, pm=None: _report())
     exp = EndToEnd(tmp_path)
     row = exp.run_trial(exp.Params(run_config="run.yaml"), 3, tmp_path / "trial")

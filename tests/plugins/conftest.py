@@ -46,8 +46,16 @@ def peg_in_hole_plan() -> Iterator[PlannedPegInHole]:
     T_a = compose(from_rpy(0, 0, 0, t=[0.33, 0.22, 0.0]), rot_z(0.5), pa[0].T_table_part)
     upright = next(p for p in pb if p.T_table_part[2, 2] > 0.99)
     T_b = compose(from_rpy(0, 0, 0, t=[0.36, -0.22, 0.0]), rot_z(-0.3), upright.T_table_part)
-    problem = AssemblyProblem(a, b, task, T_a, T_b, grasp_planner.plan(a, robot.hand),
-                              grasp_planner.plan(b, robot.hand), TablePlane(height=0.0))
+    problem = AssemblyProblem(
+        a,
+        b,
+        task,
+        T_a,
+        T_b,
+        grasp_planner.plan(a, robot.hand),
+        grasp_planner.plan(b, robot.hand),
+        TablePlane(height=0.0),
+    )
     result = planner.plan(problem, robot, motion)
     try:
         yield PlannedPegInHole(task, a, b, T_a, T_b, robot, result)

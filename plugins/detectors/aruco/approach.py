@@ -37,8 +37,10 @@ class ApproachPoint:
 
 def _points(obs: Sequence[MarkerObservation], pose: PartPose) -> tuple[np.ndarray, np.ndarray]:
     kept = [o for o in obs if o.marker_id in pose.marker_ids]
-    return (np.concatenate([o.object_points for o in kept]).astype(np.float64),
-            np.concatenate([o.corners_px for o in kept]).astype(np.float64))
+    return (
+        np.concatenate([o.object_points for o in kept]).astype(np.float64),
+        np.concatenate([o.corners_px for o in kept]).astype(np.float64),
+    )
 
 
 def refit_with_rotation(

@@ -33,8 +33,9 @@ if TYPE_CHECKING:
 __all__ = ["SplitEstimate", "charuco_marker_poses", "solvepnp_split", "split_board_task", "teacher_split"]
 
 
-def charuco_marker_poses(squares: tuple[int, int], square: float, marker: float, dictionary: str, *,
-                         legacy: bool = False) -> dict[int, np.ndarray]:
+def charuco_marker_poses(
+    squares: tuple[int, int], square: float, marker: float, dictionary: str, *, legacy: bool = False
+) -> dict[int, np.ndarray]:
     """``id -> T_board_marker`` of every marker of a ChArUco board (``squares`` along x and y).
 
     Taken from OpenCV's own layout (``CharucoBoard.getObjPoints``): the marker
@@ -54,8 +55,16 @@ def charuco_marker_poses(squares: tuple[int, int], square: float, marker: float,
     return poses
 
 
-def split_board_task(poses: dict[int, np.ndarray], ids_a: Sequence[int], ids_b: Sequence[int], T_A_B: np.ndarray,
-                     marker: float, dictionary: str, *, name: str = "board_split") -> AssemblyTask:
+def split_board_task(
+    poses: dict[int, np.ndarray],
+    ids_a: Sequence[int],
+    ids_b: Sequence[int],
+    T_A_B: np.ndarray,
+    marker: float,
+    dictionary: str,
+    *,
+    name: str = "board_split",
+) -> AssemblyTask:
     """Two pseudo-parts made of one board's markers: A's frame is the board's, B's is ``T_A_B`` in it.
 
     Each marker of B gets ``T_B_marker = T_A_B^-1 T_board_marker``, so the
@@ -66,12 +75,15 @@ def split_board_task(poses: dict[int, np.ndarray], ids_a: Sequence[int], ids_b: 
     plate = SolidSpec(add=[Primitive(shape="box", size=[0.2, 0.2, 0.001])])
 
     def part(part_name: str, ids: Sequence[int], T_part_board: np.ndarray) -> PartSpec:
-        specs = [MarkerSpec(dictionary=dictionary, id=int(i), size=marker, T_part_marker=T_part_board @ poses[int(i)])
-                 for i in ids]
+        specs = [
+            MarkerSpec(dictionary=dictionary, id=int(i), size=marker, T_part_marker=T_part_board @ poses[int(i)])
+            for i in ids
+        ]
         return PartSpec(name=part_name, solid=plate, markers=specs)
 
-    return AssemblyTask(name=name, part_a=part("A", ids_a, np.eye(4)), part_b=part("B", ids_b, T_B_A),
-                        T_A_B=T_A_B, v_a=[0.0, 0.0, 1.0])
+    return AssemblyTask(
+        name=name, part_a=part("A", ids_a, np.eye(4)), part_b=part("B", ids_b, T_B_A), T_A_B=T_A_B, v_a=[0.0, 0.0, 1.0]
+    )
 
 
 @dataclass
@@ -89,8 +101,9 @@ class SplitEstimate:
         return pose_error(self.T_A_B, T_true)
 
 
-def teacher_split(image: np.ndarray, camera: CameraIntrinsics, task: AssemblyTask,
-                  settings: ArucoTeacherSettings | None = None) -> SplitEstimate:
+def teacher_split(
+    image: np.ndarray, camera: CameraIntrinsics, task: AssemblyTask, settings: ArucoTeacherSettings | None = None
+) -> SplitEstimate:
     """``T_A_B`` from one photo the way the ArUco teacher sees each frame (:meth:`.ArucoTeacher.observe`:
     its detector and corner refinement, then :func:`.pnp.solve_part_pose`, one multi-marker PnP per part).
     ``ValueError`` when a group gets no pose."""
@@ -104,8 +117,9 @@ def teacher_split(image: np.ndarray, camera: CameraIntrinsics, task: AssemblyTas
     return SplitEstimate(r.T_A_B, list(r.pose_a.marker_ids), list(r.pose_b.marker_ids), r.rms_px)
 
 
-def solvepnp_split(image: np.ndarray, camera: CameraIntrinsics, task: AssemblyTask, *,
-                   refine: int = cv2.aruco.CORNER_REFINE_NONE) -> SplitEstimate:
+def solvepnp_split(
+    image: np.ndarray, camera: CameraIntrinsics, task: AssemblyTask, *, refine: int = cv2.aruco.CORNER_REFINE_NONE
+) -> SplitEstimate:
     """Baseline: OpenCV's ``ArucoDetector`` (default parameters, corner refinement ``refine``) and one plain
     ``cv2.solvePnP`` (``SOLVEPNP_ITERATIVE``) over all corners of each group."""
     dictionary = task.part_a.markers[0].dictionary

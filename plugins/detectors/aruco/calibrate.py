@@ -23,8 +23,16 @@ from asmteach.core.errors import UserError
 from asmteach.core.models import CameraIntrinsics, StrictModel
 from asmteach.plugins.detectors.aruco.markers import get_dictionary
 
-__all__ = ["MODELS", "BoardSpec", "CalibrationResult", "ChessboardSpec", "calibrate_charuco", "calibrate_chessboard",
-           "draw_coverage", "make_board"]
+__all__ = [
+    "MODELS",
+    "BoardSpec",
+    "CalibrationResult",
+    "ChessboardSpec",
+    "calibrate_charuco",
+    "calibrate_chessboard",
+    "draw_coverage",
+    "make_board",
+]
 
 MODELS = {
     "k1k2p1p2k3": ("k1 k2 p1 p2 k3", 0),
@@ -52,7 +60,7 @@ class ChessboardSpec(StrictModel):
 
     def object_points(self) -> np.ndarray:
         """``(cols * rows, 3) float32`` inner corners in the board frame (z = 0), metres, in OpenCV's order."""
-        grid = np.mgrid[0:self.cols, 0:self.rows].T.reshape(-1, 2) * self.square
+        grid = np.mgrid[0 : self.cols, 0 : self.rows].T.reshape(-1, 2) * self.square
         return np.column_stack([grid, np.zeros(len(grid))]).astype(np.float32)
 
 
@@ -60,8 +68,9 @@ def make_board(spec: BoardSpec) -> cv2.aruco.CharucoBoard:
     """The OpenCV board object of ``spec``."""
     if spec.marker >= spec.square:
         raise UserError(f"board marker side {spec.marker} m must be smaller than the square side {spec.square} m")
-    return cv2.aruco.CharucoBoard((spec.squares_x, spec.squares_y), spec.square, spec.marker,
-                                  get_dictionary(spec.dictionary))
+    return cv2.aruco.CharucoBoard(
+        (spec.squares_x, spec.squares_y), spec.square, spec.marker, get_dictionary(spec.dictionary)
+    )
 
 
 @dataclass
@@ -107,8 +116,18 @@ def _image_size(images: Sequence[np.ndarray], names: list[str]) -> tuple[int, in
     return w, h
 
 
-def _calibrate(obj_all: list[np.ndarray], img_all: list[np.ndarray], size: tuple[int, int], used: list[str],
-               skipped: list[str], total: int, board: str, *, model: str, fix_aspect: bool) -> CalibrationResult:
+def _calibrate(
+    obj_all: list[np.ndarray],
+    img_all: list[np.ndarray],
+    size: tuple[int, int],
+    used: list[str],
+    skipped: list[str],
+    total: int,
+    board: str,
+    *,
+    model: str,
+    fix_aspect: bool,
+) -> CalibrationResult:
     """``calibrateCamera`` on the views found, then each view's RMS through ``projectPoints``."""
     if model not in MODELS:
         raise UserError(f"unknown distortion model {model!r}; use one of {sorted(MODELS)}")
@@ -131,14 +150,27 @@ def _calibrate(obj_all: list[np.ndarray], img_all: list[np.ndarray], size: tuple
     cam = CameraIntrinsics(K=K, dist=dist.tolist(), width=size[0], height=size[1])
     aspect = "fx = fy (CALIB_FIX_ASPECT_RATIO)" if fix_aspect else "fx, fy free"
     return CalibrationResult(
-        camera=cam, rms_px=float(rms), images_used=len(obj_all), images_total=total, per_view_px=per_view,
-        used=used, skipped=skipped, corners=[np.asarray(i, dtype=np.float64).reshape(-1, 2) for i in img_all],
+        camera=cam,
+        rms_px=float(rms),
+        images_used=len(obj_all),
+        images_total=total,
+        per_view_px=per_view,
+        used=used,
+        skipped=skipped,
+        corners=[np.asarray(i, dtype=np.float64).reshape(-1, 2) for i in img_all],
         model=f"pinhole {aspect}, distortion {words} (plumb_bob)",
     )
 
 
-def calibrate_charuco(images: Sequence[np.ndarray], spec: BoardSpec, *, names: Sequence[str] | None = None,
-                      min_corners: int = 8, model: str = "k1k2p1p2k3", fix_aspect: bool = False) -> CalibrationResult:
+def calibrate_charuco(
+    images: Sequence[np.ndarray],
+    spec: BoardSpec,
+    *,
+    names: Sequence[str] | None = None,
+    min_corners: int = 8,
+    model: str = "k1k2p1p2k3",
+    fix_aspect: bool = False,
+) -> CalibrationResult:
     """Calibrate from views of a ChArUco board; :class:`UserError` when fewer than 3 views show it."""
     board = make_board(spec)
     detector = cv2.aruco.CharucoDetector(board)
@@ -160,8 +192,14 @@ def calibrate_charuco(images: Sequence[np.ndarray], spec: BoardSpec, *, names: S
     return _calibrate(obj_all, img_all, size, used, skipped, len(images), what, model=model, fix_aspect=fix_aspect)
 
 
-def calibrate_chessboard(images: Sequence[np.ndarray], spec: ChessboardSpec, *, names: Sequence[str] | None = None,
-                         model: str = "k1k2p1p2k3", fix_aspect: bool = False) -> CalibrationResult:
+def calibrate_chessboard(
+    images: Sequence[np.ndarray],
+    spec: ChessboardSpec,
+    *,
+    names: Sequence[str] | None = None,
+    model: str = "k1k2p1p2k3",
+    fix_aspect: bool = False,
+) -> CalibrationResult:
     """Calibrate from views of a plain chessboard (``findChessboardCorners`` + ``cornerSubPix``).
 
     A view counts only when all ``cols x rows`` inner corners are found (a
@@ -215,6 +253,14 @@ def draw_coverage(result: CalibrationResult, *, cells: tuple[int, int] = (8, 6))
     for j in range(1, cells[1]):
         cv2.line(canvas, (0, j * h // cells[1]), (w - 1, j * h // cells[1]), (90, 90, 90), 1)
     frac = float(grid.mean())
-    cv2.putText(canvas, f"{len(result.corners)} views, {frac:.0%} of cells covered", (8, 20),
-                cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
+    cv2.putText(
+        canvas,
+        f"{len(result.corners)} views, {frac:.0%} of cells covered",
+        (8, 20),
+        cv2.FONT_HERSHEY_SIMPLEX,
+        0.5,
+        (255, 255, 255),
+        1,
+        cv2.LINE_AA,
+    )
     return canvas, frac

@@ -61,6 +61,7 @@ def _matrix(node: Any, shape: tuple[int, int] | None, what: str, path: Path) -> 
 def _from_filestorage(path: Path) -> CameraIntrinsics:
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     try:
+
         def node(*names: str) -> Any:
             for n in names:
                 nd = fs.getNode(n)
@@ -97,8 +98,15 @@ def load_camera(path: str | Path) -> CameraIntrinsics:
     raw = read_yaml(p)
     if not isinstance(raw, dict):
         raise UserError(f"{p}: a camera file must be a YAML mapping")
-    known = {"image_width", "image_height", "camera_matrix", "distortion_model", "distortion_coefficients",
-             "camera_name", "notes"}
+    known = {
+        "image_width",
+        "image_height",
+        "camera_matrix",
+        "distortion_model",
+        "distortion_coefficients",
+        "camera_name",
+        "notes",
+    }
     extra = sorted(set(raw) - known)
     if extra:
         raise UserError(f"{p}: unknown key(s) {extra}; a camera file takes {sorted(known)}")
@@ -121,7 +129,8 @@ def save_camera(path: str | Path, camera: CameraIntrinsics, *, name: str = "came
         "camera_matrix: {rows: 3, cols: 3, data: [" + ", ".join(f"{x:.10g}" for x in K.ravel()) + "]}",
         "distortion_model: plumb_bob",
         f"distortion_coefficients: {{rows: 1, cols: {len(camera.dist)}, data: ["
-        + ", ".join(f"{x:.10g}" for x in camera.dist) + "]}",
+        + ", ".join(f"{x:.10g}" for x in camera.dist)
+        + "]}",
     ]
     if notes:
         lines.append(f"notes: {notes!r}")

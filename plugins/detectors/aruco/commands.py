@@ -49,8 +49,10 @@ def check_demonstration(task: AssemblyTask, demo: dict, camera_file: Path | None
     settings = _demo_model(demo)
     camera = load_camera(camera_file) if camera_file is not None else c615_like()
     if any(abs(d) > 0 for d in camera.dist):
-        raise UserError(f"camera {camera_file}: the demonstration renderer draws an ideal pinhole camera; give "
-                        "intrinsics without distortion (distortion_coefficients all 0)")
+        raise UserError(
+            f"camera {camera_file}: the demonstration renderer draws an ideal pinhole camera; give "
+            "intrinsics without distortion (distortion_coefficients all 0)"
+        )
     marker_table(task.part_a, task.part_b)  # a part without markers, a shared id, an unknown dictionary
     for part in (task.part_a, task.part_b):
         for m in part.markers:
@@ -91,7 +93,9 @@ def _camera_noting_distortion(path: str | Path) -> CameraIntrinsics:
     if isinstance(raw, dict) and "distortion_coefficients" not in raw:
         logging.getLogger("asmteach").warning(
             "%s gives no distortion_coefficients: the camera is taken as distortion-free; calibrate it "
-            "(asmteach calibrate) or write zeros to say so", path)
+            "(asmteach calibrate) or write zeros to say so",
+            path,
+        )
     return camera
 
 
@@ -126,8 +130,10 @@ def _cmd_teach(args: argparse.Namespace) -> int:
     print(f"  T_A_B: xyz {pose['xyz_mm']} mm, rpy {pose['rpy_deg']} deg")
     print(f"  v_a: {np.round(learned.v_a, 4).tolist()} ({ev.insertion_source if ev else '?'})")
     if ev is not None:
-        print(f"  frames used {len(ev.frames_used)}/{ev.frames_total}, spread {ev.spread_mm:.3f} mm "
-              f"{ev.spread_deg:.3f} deg")
+        print(
+            f"  frames used {len(ev.frames_used)}/{ev.frames_total}, spread {ev.spread_mm:.3f} mm "
+            f"{ev.spread_deg:.3f} deg"
+        )
     print(f"  wrote {args.out}")
     return 0
 
@@ -145,8 +151,10 @@ def _check_jpegs_whole(folder: Path) -> None:
             fh.seek(max(0, size - 64))
             tail = fh.read()
         if size > 2 and b"\xff\xd9" not in tail:  # EOI; a few padding bytes after it are allowed
-            raise UserError(f"{f}: the JPEG is cut short (no end-of-image marker; {size} bytes); copy it again or "
-                            "remove it from the frames")
+            raise UserError(
+                f"{f}: the JPEG is cut short (no end-of-image marker; {size} bytes); copy it again or "
+                "remove it from the frames"
+            )
 
 
 def write_demo(cfg: RunConfig, out: Path, *, camera: CameraIntrinsics | None = None) -> dict:
@@ -168,8 +176,15 @@ def write_demo(cfg: RunConfig, out: Path, *, camera: CameraIntrinsics | None = N
         with atomic_path(out / name) as tmp:
             if not cv2.imwrite(str(tmp), img):
                 raise UserError(f"{out / name}: cannot write the image")
-        records.append({"file": name, "phase": fr.phase, "T_cam_A": fr.T_cam_A.tolist(),
-                        "T_cam_B": fr.T_cam_B.tolist(), "visible_markers": visible})
+        records.append(
+            {
+                "file": name,
+                "phase": fr.phase,
+                "T_cam_A": fr.T_cam_A.tolist(),
+                "T_cam_B": fr.T_cam_B.tolist(),
+                "visible_markers": visible,
+            }
+        )
     save_camera(out / "camera.yaml", camera, name="render-demo")
     truth = {
         "structure": task.name,
@@ -220,11 +235,15 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             if args.cols is not None or args.rows is not None:
                 raise UserError("--cols/--rows are for --board chessboard; a ChArUco board is --board NxM squares")
             sx, sy = (int(v) for v in board.split("x"))
-            spec = BoardSpec(squares_x=sx, squares_y=sy, square=args.square, marker=args.marker,
-                             dictionary=args.dictionary)
+            spec = BoardSpec(
+                squares_x=sx, squares_y=sy, square=args.square, marker=args.marker, dictionary=args.dictionary
+            )
     except ValueError as exc:
-        msg = (format_validation_error(exc) if isinstance(exc, ValidationError)
-               else "give --board as NxM ChArUco squares (e.g. 7x5) or chessboard")
+        msg = (
+            format_validation_error(exc)
+            if isinstance(exc, ValidationError)
+            else "give --board as NxM ChArUco squares (e.g. 7x5) or chessboard"
+        )
         raise UserError(f"--board/--cols/--rows/--square/--marker: {msg}") from None
     _check_jpegs_whole(Path(args.images))
     named = load_named_frames(args.images)
@@ -237,13 +256,19 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         kind = "charuco"
     for name in res.skipped:
         print(f"{name}: board not found, skipped")
-    save_camera(args.out, res.camera, name=f"{kind}-calibration",
-                notes=f"RMS {res.rms_px:.3f} px over {res.images_used}/{res.images_total} images; {res.model}")
+    save_camera(
+        args.out,
+        res.camera,
+        name=f"{kind}-calibration",
+        notes=f"RMS {res.rms_px:.3f} px over {res.images_used}/{res.images_total} images; {res.model}",
+    )
     K = res.camera.K
     print(f"calibrated from {res.images_used}/{res.images_total} image(s): RMS {res.rms_px:.3f} px")
     print(f"  model: {res.model}")
-    print(f"  fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} cx {K[0, 2]:.2f} cy {K[1, 2]:.2f}; dist "
-          f"{np.round(res.camera.dist, 4).tolist()}")
+    print(
+        f"  fx {K[0, 0]:.2f} fy {K[1, 1]:.2f} cx {K[0, 2]:.2f} cy {K[1, 2]:.2f}; dist "
+        f"{np.round(res.camera.dist, 4).tolist()}"
+    )
     print("  per-view RMS (px): " + ", ".join(f"{n} {e:.3f}" for n, e in zip(res.used, res.per_view_px, strict=True)))
     coverage = Path(args.coverage) if args.coverage else Path(args.out).with_name(Path(args.out).stem + "_coverage.png")
     canvas, frac = draw_coverage(res)
@@ -274,17 +299,30 @@ def asmteach_add_commands(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("calibrate", help="camera intrinsics from ChArUco or chessboard photos")
     p.add_argument("--images", required=True, help="folder of board images (or a video)")
     p.add_argument("--out", required=True, help="camera YAML to write")
-    p.add_argument("--board", default="7x5",
-                   help="ChArUco squares along x and y (e.g. 7x5), or 'chessboard' (then give --cols and --rows)")
+    p.add_argument(
+        "--board",
+        default="7x5",
+        help="ChArUco squares along x and y (e.g. 7x5), or 'chessboard' (then give --cols and --rows)",
+    )
     p.add_argument("--cols", type=int, default=None, help="chessboard inner corners along x, e.g. 9")
     p.add_argument("--rows", type=int, default=None, help="chessboard inner corners along y, e.g. 6")
     p.add_argument("--square", type=float, default=0.04, help="square side, metres")
     p.add_argument("--marker", type=float, default=0.03, help="ChArUco marker side, metres")
     p.add_argument("--dictionary", default="DICT_5X5_100", help="ArUco dictionary of a ChArUco board")
-    p.add_argument("--model", default="k1k2p1p2k3", choices=["k1k2p1p2k3", "k1k2p1p2"],
-                   help="distortion coefficients estimated (k1k2p1p2 holds k3 at 0)")
-    p.add_argument("--fix-aspect", action="store_true",
-                   help="estimate one focal length, fx = fy (OpenCV's CALIB_FIX_ASPECT_RATIO with aspect 1)")
-    p.add_argument("--coverage", default=None,
-                   help="PNG of all views' corners over the image (default: <out stem>_coverage.png beside --out)")
+    p.add_argument(
+        "--model",
+        default="k1k2p1p2k3",
+        choices=["k1k2p1p2k3", "k1k2p1p2"],
+        help="distortion coefficients estimated (k1k2p1p2 holds k3 at 0)",
+    )
+    p.add_argument(
+        "--fix-aspect",
+        action="store_true",
+        help="estimate one focal length, fx = fy (OpenCV's CALIB_FIX_ASPECT_RATIO with aspect 1)",
+    )
+    p.add_argument(
+        "--coverage",
+        default=None,
+        help="PNG of all views' corners over the image (default: <out stem>_coverage.png beside --out)",
+    )
     p.set_defaults(func=_cmd_calibrate)

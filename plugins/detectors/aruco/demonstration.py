@@ -49,12 +49,26 @@ def demonstrate(
             with atomic_path(Path(out_dir) / name) as tmp:
                 if not cv2.imwrite(str(tmp), img):
                     raise UserError(f"{Path(out_dir) / name}: cannot write the image")
-            records.append({"file": name, "phase": fr.phase, "T_cam_A": fr.T_cam_A.tolist(),
-                            "T_cam_B": fr.T_cam_B.tolist(), "visible_markers": visible})
+            records.append(
+                {
+                    "file": name,
+                    "phase": fr.phase,
+                    "T_cam_A": fr.T_cam_A.tolist(),
+                    "T_cam_B": fr.T_cam_B.tolist(),
+                    "visible_markers": visible,
+                }
+            )
     if out_dir is not None:
         save_camera(Path(out_dir) / "camera.yaml", camera, name="demonstration")
-        write_json(Path(out_dir) / "ground_truth.json", {
-            "structure": task.name, "seed": seed, "demo": settings.model_dump(mode="json"),
-            "T_A_B": task.T_A_B.tolist(), "v_a": np.asarray(task.v_a).tolist(), "frames": records,
-        })
+        write_json(
+            Path(out_dir) / "ground_truth.json",
+            {
+                "structure": task.name,
+                "seed": seed,
+                "demo": settings.model_dump(mode="json"),
+                "T_A_B": task.T_A_B.tolist(),
+                "v_a": np.asarray(task.v_a).tolist(),
+                "frames": records,
+            },
+        )
     return frames, camera

@@ -79,10 +79,14 @@ class MarkerDetector:
                     continue
                 corners_px = np.asarray(c, dtype=np.float64).reshape(4, 2)
                 if grey_f is not None:
-                    refined = refine_corners_edges(grey_f, corners_px, self.cells[name],
-                                                   min_inliers=self.edge_min_inliers,
-                                                   max_line_rms=self.edge_max_line_rms,
-                                                   noise_factor=self.edge_noise_factor)
+                    refined = refine_corners_edges(
+                        grey_f,
+                        corners_px,
+                        self.cells[name],
+                        min_inliers=self.edge_min_inliers,
+                        max_line_rms=self.edge_max_line_rms,
+                        noise_factor=self.edge_noise_factor,
+                    )
                     if refined is None:
                         continue  # partly occluded: its corners cannot be trusted
                     corners_px = refined
@@ -91,7 +95,11 @@ class MarkerDetector:
 
 
 def _side_points(
-    grey: np.ndarray, a: np.ndarray, b: np.ndarray, outward: np.ndarray, half_width: float,
+    grey: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    outward: np.ndarray,
+    half_width: float,
     plateau_tol: float = 0.15,
 ) -> tuple[np.ndarray, int]:
     """Sub-pixel edge points along the side ``a -> b`` of a dark square on a bright margin.
@@ -112,7 +120,10 @@ def _side_points(
     d = np.arange(-half_width, half_width + 1e-9, step)
     pts = a[None, None, :] + s[:, None, None] * t + d[None, :, None] * outward  # (n_along, n_d, 2)
     prof = cv2.remap(
-        grey, pts[..., 0].astype(np.float32), pts[..., 1].astype(np.float32), cv2.INTER_LINEAR,
+        grey,
+        pts[..., 0].astype(np.float32),
+        pts[..., 1].astype(np.float32),
+        cv2.INTER_LINEAR,
         borderMode=cv2.BORDER_REPLICATE,
     ).astype(np.float64)
     k = max(2, len(d) // 5)
@@ -171,8 +182,14 @@ def _point_noise(residuals: np.ndarray) -> float:
 
 
 def refine_corners_edges(
-    grey: np.ndarray, corners: np.ndarray, cells: int, iterations: int = 2, *, min_inliers: float = 0.85,
-    max_line_rms: float = 0.25, noise_factor: float = 2.5,
+    grey: np.ndarray,
+    corners: np.ndarray,
+    cells: int,
+    iterations: int = 2,
+    *,
+    min_inliers: float = 0.85,
+    max_line_rms: float = 0.25,
+    noise_factor: float = 2.5,
 ) -> np.ndarray | None:
     """Refine a marker's ``(4, 2)`` corners by fitting lines to its four outer edges.
 

@@ -99,8 +99,9 @@ def check_retreat(
             first = float(s)
             break
     end_free = not pair.collides(_moved(T_A_B, -retract * v))
-    return RetreatCheck(ok=end_free and first is None, end_free=end_free, path_free=first is None,
-                        first_collision=first)
+    return RetreatCheck(
+        ok=end_free and first is None, end_free=end_free, path_free=first is None, first_collision=first
+    )
 
 
 def _path_free(pair: _Pair, T_A_B: np.ndarray, v: np.ndarray, retract: float, step: float) -> bool:
@@ -173,8 +174,13 @@ def separation_direction(
     i = np.arange(directions) + 0.5
     phi = np.arccos(1 - 2 * i / directions)
     theta = np.pi * (1 + 5**0.5) * i
-    cand = np.vstack([np.eye(3), -np.eye(3),
-                      np.column_stack([np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)])])
+    cand = np.vstack(
+        [
+            np.eye(3),
+            -np.eye(3),
+            np.column_stack([np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)]),
+        ]
+    )
     travel = np.full(len(cand), np.inf)
     for k, d in enumerate(cand):
         for s in np.arange(step, max_travel + 1e-12, step):
@@ -195,8 +201,9 @@ def separation_direction(
     return -d, best
 
 
-def direction_from_approach(positions: np.ndarray, assembled: np.ndarray, *, k: float = 3.0,
-                            min_lateral: float = 0.001) -> tuple[np.ndarray, float, int]:
+def direction_from_approach(
+    positions: np.ndarray, assembled: np.ndarray, *, k: float = 3.0, min_lateral: float = 0.001
+) -> tuple[np.ndarray, float, int]:
     """``v_a`` from B's origins ``(n, 3)`` in A's frame during the approach.
 
     A line through the assembled position (known far better than any single

@@ -54,8 +54,9 @@ def tilt_matrix(tau_x: float, tau_y: float) -> np.ndarray:
     return proj_z @ rot_xy
 
 
-def project_camera_points(P: np.ndarray, K: np.ndarray, dist: np.ndarray | list[float], *,
-                          jacobian: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+def project_camera_points(
+    P: np.ndarray, K: np.ndarray, dist: np.ndarray | list[float], *, jacobian: bool = False
+) -> tuple[np.ndarray, np.ndarray | None]:
     """Project ``(n, 3)`` camera-frame points (metres) to ``(n, 2)`` pixels with OpenCV's model.
 
     With ``jacobian=True`` also returns ``(n, 2, 3)``: d(pixel)/d(point), pixels

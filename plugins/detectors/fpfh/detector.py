@@ -74,7 +74,9 @@ class FpfhSettings(StrictModel):
     size_slack: float = Field(1.25, ge=1.0, description="a cluster wider than this times the part's is skipped")
     scan_spacing: float = Field(0.002, gt=0.0, description="voxel size a part given as a scan is thinned to, metres")
     scan_min_coverage: float = Field(
-        0.7, ge=0.0, le=1.0,
+        0.7,
+        ge=0.0,
+        le=1.0,
         description="part given as a scan: least share of its points facing the camera that lie on seen points",
     )
 
@@ -254,8 +256,16 @@ def scan_model(part: PartModel, spacing: float, normal_radius: float) -> ModelCl
     hull = part.mesh
     center = np.asarray(hull.bounds).mean(axis=0)
     scene = o3d.t.geometry.RaycastingScene()  # empty: a scan has no surface to cast rays at
-    return ModelCloud(pts, nrm, hull, pcd, float(np.max(np.linalg.norm(pts - center, axis=1))), center,
-                      np.asarray(hull.vertices, dtype=float), scene)
+    return ModelCloud(
+        pts,
+        nrm,
+        hull,
+        pcd,
+        float(np.max(np.linalg.norm(pts - center, axis=1))),
+        center,
+        np.asarray(hull.vertices, dtype=float),
+        scene,
+    )
 
 
 def verify_scan(

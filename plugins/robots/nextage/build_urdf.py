@@ -164,8 +164,13 @@ def _box_inertial(mass: float, size: Vec, com: Vec) -> Inertial:
 
 def _mirror(shape: Shape) -> Shape:
     """The right-arm primitive of a left-arm one (y negated, roll negated)."""
-    return Shape(shape.kind, shape.size, (shape.xyz[0], -shape.xyz[1], shape.xyz[2]),
-                 (-shape.rpy[0], shape.rpy[1], -shape.rpy[2]), shape.name)
+    return Shape(
+        shape.kind,
+        shape.size,
+        (shape.xyz[0], -shape.xyz[1], shape.xyz[2]),
+        (-shape.rpy[0], shape.rpy[1], -shape.rpy[2]),
+        shape.name,
+    )
 
 
 def _mirror_inertial(i: Inertial) -> Inertial:
@@ -182,18 +187,45 @@ _LARM_BOXES: list[tuple[Vec, Vec]] = [
     ((0.0745, 0.0978, 0.1406), (-0.00375, 0.0224, -0.0459)),
 ]
 _LARM_INERTIALS: list[Inertial] = [
-    Inertial(1.32626, (-0.00226388, -0.00521383, 0.0156081), 0.00207537, 0.00011276, 8.927e-05, 0.00240295,
-             -4.57e-05, 0.00141912),
-    Inertial(1.14898, (-5.236e-05, 0.0583134, -0.107061), 0.0154168, 9.95417e-07, 3.38147e-06, 0.0147117,
-             0.00213719, 0.0012658),
-    Inertial(0.577518, (-2.254e-05, 0.00167107, -0.0715116), 0.00143966, -3e-07, 1.2e-06, 0.00141763, -7.596e-05,
-             0.0001972),
-    Inertial(0.457418, (-1.788e-05, -0.00395812, -0.20273), 0.00069205, 3e-08, 5.2e-07, 0.00068903, -1.915e-05,
-             0.00013509),
-    Inertial(0.418434, (0.00243131, 0.00379733, -0.0577036), 0.00052016, 1.69e-06, 7.9e-06, 0.00050569, -5.377e-05,
-             0.00014004),
-    Inertial(1.05156, (-0.048476, -3.2e-06, -0.0388988), 0.00194072, 1.1e-07, -0.00042482, 0.00209392, 1.2e-07,
-             0.00035788),
+    Inertial(
+        1.32626,
+        (-0.00226388, -0.00521383, 0.0156081),
+        0.00207537,
+        0.00011276,
+        8.927e-05,
+        0.00240295,
+        -4.57e-05,
+        0.00141912,
+    ),
+    Inertial(
+        1.14898,
+        (-5.236e-05, 0.0583134, -0.107061),
+        0.0154168,
+        9.95417e-07,
+        3.38147e-06,
+        0.0147117,
+        0.00213719,
+        0.0012658,
+    ),
+    Inertial(
+        0.577518, (-2.254e-05, 0.00167107, -0.0715116), 0.00143966, -3e-07, 1.2e-06, 0.00141763, -7.596e-05, 0.0001972
+    ),
+    Inertial(
+        0.457418, (-1.788e-05, -0.00395812, -0.20273), 0.00069205, 3e-08, 5.2e-07, 0.00068903, -1.915e-05, 0.00013509
+    ),
+    Inertial(
+        0.418434,
+        (0.00243131, 0.00379733, -0.0577036),
+        0.00052016,
+        1.69e-06,
+        7.9e-06,
+        0.00050569,
+        -5.377e-05,
+        0.00014004,
+    ),
+    Inertial(
+        1.05156, (-0.048476, -3.2e-06, -0.0388988), 0.00194072, 1.1e-07, -0.00042482, 0.00209392, 1.2e-07, 0.00035788
+    ),
 ]
 # Wrist-roll housing and tool changer stay on *ARM_JOINT5_Link; the stock chuck hand is replaced.
 _WRIST_SHAPES = [
@@ -225,23 +257,43 @@ def gripper_xml(prefix: str, parent: str) -> list[str]:
     grip = f"{prefix}_GRIPPER_Link"
     parts.append(_joint(f"{prefix}_GRIPPER_MOUNT", "fixed", parent, grip, (g.mount_x, 0.0, 0.0)))
     body_c = (-0.5 * g.body_size[0], 0.0, 0.0)
-    parts.append(_link(grip, _box_inertial(g.body_mass, g.body_size, body_c),
-                       [Shape("box", g.body_size, body_c, ZERO, "gripper_body")], "gripper"))
+    parts.append(
+        _link(
+            grip,
+            _box_inertial(g.body_mass, g.body_size, body_c),
+            [Shape("box", g.body_size, body_c, ZERO, "gripper_body")],
+            "gripper",
+        )
+    )
     fsize = (g.finger_length, g.finger_thickness, g.finger_width)
     for f, sign in ((0, -1.0), (1, 1.0)):
         link = f"{prefix}_FINGER{f}_Link"
         # Joint value = half the opening; at 0 the inner faces meet on the jaw plane y = 0.
-        parts.append(_joint(f"{prefix}_FINGER{f}_JOINT", "prismatic", grip, link, ZERO, ZERO, (0, sign, 0),
-                            (0.0, 0.5 * g.max_opening, g.finger_effort, g.finger_speed), damping=1.0))
+        parts.append(
+            _joint(
+                f"{prefix}_FINGER{f}_JOINT",
+                "prismatic",
+                grip,
+                link,
+                ZERO,
+                ZERO,
+                (0, sign, 0),
+                (0.0, 0.5 * g.max_opening, g.finger_effort, g.finger_speed),
+                damping=1.0,
+            )
+        )
         c = (g.finger_center_x, sign * 0.5 * g.finger_thickness, 0.0)
-        parts.append(_link(link, _box_inertial(g.finger_mass, fsize, c), [Shape("box", fsize, c, ZERO, "finger")],
-                           "finger"))
+        parts.append(
+            _link(link, _box_inertial(g.finger_mass, fsize, c), [Shape("box", fsize, c, ZERO, "finger")], "finger")
+        )
     tcp = f"{prefix}_TCP_Link"
     # TCP frame: z = approach (-x of the mount), y = jaw axis (+y of the mount), x = y cross z.
     parts.append(_joint(f"{prefix}_TCP_JOINT", "fixed", grip, tcp, (-g.tcp_depth, 0.0, 0.0), (0.0, -HALF_PI, 0.0)))
-    parts.append(f'  <link name="{tcp}">\n    <inertial>\n      <origin xyz="0 0 0" rpy="0 0 0"/>\n'
-                 '      <mass value="0.001"/>\n      <inertia ixx="1e-07" ixy="0" ixz="0" iyy="1e-07" iyz="0" '
-                 'izz="1e-07"/>\n    </inertial>\n  </link>')
+    parts.append(
+        f'  <link name="{tcp}">\n    <inertial>\n      <origin xyz="0 0 0" rpy="0 0 0"/>\n'
+        '      <mass value="0.001"/>\n      <inertia ixx="1e-07" ixy="0" ixz="0" iyy="1e-07" iyz="0" '
+        'izz="1e-07"/>\n    </inertial>\n  </link>'
+    )
     return parts
 
 
@@ -293,13 +345,24 @@ def build_urdf() -> str:
         # outside our shapes; benchmarks/nextage_vendor.py). x, y extents unchanged.
         Shape("box", (0.2717, 0.2246, 0.209), (-0.05095, 0.0, 0.4494), ZERO, "upper_torso"),
         Shape("box", (0.2127, 0.224, 0.1153), (-0.03365, 0.0, 0.28725), ZERO, "lower_torso"),
-        Shape("box", (0.1763, 0.1168, 0.0634), (-0.0206, 0.16292, 0.49822), (-SHOULDER_ROLL, 0.0, 0.0),
-              "shoulder_cap_left"),
-        Shape("box", (0.1763, 0.1168, 0.0634), (-0.0206, -0.16292, 0.49822), (SHOULDER_ROLL, 0.0, 0.0),
-              "shoulder_cap_right"),
+        Shape(
+            "box",
+            (0.1763, 0.1168, 0.0634),
+            (-0.0206, 0.16292, 0.49822),
+            (-SHOULDER_ROLL, 0.0, 0.0),
+            "shoulder_cap_left",
+        ),
+        Shape(
+            "box",
+            (0.1763, 0.1168, 0.0634),
+            (-0.0206, -0.16292, 0.49822),
+            (SHOULDER_ROLL, 0.0, 0.0),
+            "shoulder_cap_right",
+        ),
         Shape("cylinder", (0.037, 0.078), (0.0, 0.12455, 0.29399), (-SHOULDER_ROLL, 0.0, 0.0), "shoulder_housing_left"),
-        Shape("cylinder", (0.037, 0.078), (0.0, -0.12455, 0.29399), (SHOULDER_ROLL, 0.0, 0.0),
-              "shoulder_housing_right"),
+        Shape(
+            "cylinder", (0.037, 0.078), (0.0, -0.12455, 0.29399), (SHOULDER_ROLL, 0.0, 0.0), "shoulder_housing_right"
+        ),
     ]
     head0 = [Shape("box", (0.083, 0.072, 0.0505), (-0.0125, 0.007, -0.00225), ZERO, "neck_yaw_housing")]
     head1 = [
@@ -314,16 +377,57 @@ def build_urdf() -> str:
         '<robot name="NextageOpen">',
         *MATERIALS,
         _link("WAIST", Inertial(1000.0, ZERO, 20.0, 0.0, 0.0, 20.0, 0.0, 20.0), waist, "body"),
-        _joint("CHEST_JOINT0", "revolute", "WAIST", "CHEST_JOINT0_Link", ZERO, ZERO, (0, 0, 1),
-               (-LIM_163, LIM_163, 100, 1.91986)),
-        _link("CHEST_JOINT0_Link", Inertial(3.0, ZERO, 0.0639575, -0.00022833, 0.00011172, 0.0310845, 6.48e-05,
-                                            0.0501107), chest, "body"),
-        _joint("HEAD_JOINT0", "revolute", "CHEST_JOINT0_Link", "HEAD_JOINT0_Link", (0.0, 0.0, 0.5695), ZERO,
-               (0, 0, 1), (-LIM_70, LIM_70, 100, 2.61799)),
-        _link("HEAD_JOINT0_Link", Inertial(0.317929, (-2.292e-05, 0.00547848, -0.00784016), 0.00027682, 3e-08,
-                                           -3.3e-07, 0.00013009, -1.092e-05, 0.00020954), head0, "body"),
-        _joint("HEAD_JOINT1", "revolute", "HEAD_JOINT0_Link", "HEAD_JOINT1_Link", ZERO, ZERO, (0, 1, 0),
-               (LIM_M20, LIM_70, 100, 4.36332)),
+        _joint(
+            "CHEST_JOINT0",
+            "revolute",
+            "WAIST",
+            "CHEST_JOINT0_Link",
+            ZERO,
+            ZERO,
+            (0, 0, 1),
+            (-LIM_163, LIM_163, 100, 1.91986),
+        ),
+        _link(
+            "CHEST_JOINT0_Link",
+            Inertial(3.0, ZERO, 0.0639575, -0.00022833, 0.00011172, 0.0310845, 6.48e-05, 0.0501107),
+            chest,
+            "body",
+        ),
+        _joint(
+            "HEAD_JOINT0",
+            "revolute",
+            "CHEST_JOINT0_Link",
+            "HEAD_JOINT0_Link",
+            (0.0, 0.0, 0.5695),
+            ZERO,
+            (0, 0, 1),
+            (-LIM_70, LIM_70, 100, 2.61799),
+        ),
+        _link(
+            "HEAD_JOINT0_Link",
+            Inertial(
+                0.317929,
+                (-2.292e-05, 0.00547848, -0.00784016),
+                0.00027682,
+                3e-08,
+                -3.3e-07,
+                0.00013009,
+                -1.092e-05,
+                0.00020954,
+            ),
+            head0,
+            "body",
+        ),
+        _joint(
+            "HEAD_JOINT1",
+            "revolute",
+            "HEAD_JOINT0_Link",
+            "HEAD_JOINT1_Link",
+            ZERO,
+            ZERO,
+            (0, 1, 0),
+            (LIM_M20, LIM_70, 100, 4.36332),
+        ),
         _link("HEAD_JOINT1_Link", Inertial(0.0808593, ZERO, 0.001, 0.0, 0.0, 0.001, 0.0, 0.001), head1, "body"),
         *_arm("LARM", 1.0),
         *_arm("RARM", -1.0),

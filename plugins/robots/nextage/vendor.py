@@ -58,8 +58,9 @@ def cut_at_flange(mesh: trimesh.Trimesh, T_link_mesh: np.ndarray, flange_x: floa
     m = mesh.copy()
     m.apply_transform(T_link_mesh)
     # slice_faces_plane, not Trimesh.slice_plane: the latter imports shapely even without a cap
-    out = trimesh.intersections.slice_faces_plane(m.vertices, m.faces, plane_normal=[1.0, 0.0, 0.0],
-                                                  plane_origin=[flange_x, 0.0, 0.0])
+    out = trimesh.intersections.slice_faces_plane(
+        m.vertices, m.faces, plane_normal=[1.0, 0.0, 0.0], plane_origin=[flange_x, 0.0, 0.0]
+    )
     cut = trimesh.Trimesh(out[0], out[1], process=True)
     if len(cut.faces) == 0:
         raise UserError(f"the wrist mesh has nothing on the arm side of x = {flange_x} m (is it the wrist link?)")
@@ -80,11 +81,14 @@ def vendor_urdf(urdf: str | Path, package_paths: Sequence[str | Path] = ()) -> P
     links = {e.get("name"): e for e in root.findall("link")}
     for pre in ARM_PREFIXES:
         if f"{pre}_JOINT5_Link" not in links:
-            raise UserError(f"{res.source.name}: no link {pre}_JOINT5_Link; the vendor option needs the Nextage's "
-                            "link names (NextageOpen.urdf of nextage_description)")
+            raise UserError(
+                f"{res.source.name}: no link {pre}_JOINT5_Link; the vendor option needs the Nextage's "
+                "link names (NextageOpen.urdf of nextage_description)"
+            )
         if f"{pre}_GRIPPER_Link" in links:
-            raise UserError(f"{res.source.name}: {pre}_GRIPPER_Link already exists; give the vendor's file, "
-                            "not our nextage.urdf")
+            raise UserError(
+                f"{res.source.name}: {pre}_GRIPPER_Link already exists; give the vendor's file, not our nextage.urdf"
+            )
     out_dir = res.path.parent
     for pre in ARM_PREFIXES:
         link = links[f"{pre}_JOINT5_Link"]

@@ -165,7 +165,7 @@ def test_label_scene_labels_nan_rows_zero() -> None:
     plane, labels, reason = label_scene(pts, SegmentSettings())
     assert reason is None and plane is not None and abs(plane.height) < 1e-3
     assert np.mean(labels[: len(table)] > 0) < 1e-3  # the table (0.5 mm noise) is no object
-    assert np.mean(labels[len(table):len(table) + len(box)][box[:, 2] > 0.01] == 1) > 0.97
+    assert np.mean(labels[len(table) : len(table) + len(box)][box[:, 2] > 0.01] == 1) > 0.97
     assert np.all(labels[-10:] == 0)
 
 

@@ -1,6 +1,5 @@
 """The generic sweep figure: which metrics, against which key, with which statistics."""
 
-
 import numpy as np
 import pytest
 

@@ -57,8 +57,9 @@ def test_every_corpus_part_gets_a_group_that_maps_its_surface_onto_itself() -> N
         syms = part_symmetries(mesh, com)
         assert np.allclose(syms[0], np.eye(4)), part.name
         scene = o3d.t.geometry.RaycastingScene()
-        scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
-                            o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
+        scene.add_triangles(
+            o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)), o3d.core.Tensor(np.asarray(mesh.faces, np.uint32))
+        )
         pts, _ = trimesh.sample.sample_surface(mesh, 400, seed=1)
         for S in syms[1:]:
             assert np.isclose(np.linalg.det(S[:3, :3]), 1.0), part.name
@@ -74,8 +75,9 @@ def test_a_tube_is_equivalent_under_every_turn_about_its_axis_and_errors_see_it(
     com = tube.center_mass
     eq = equivalent_transforms(tube, com)
     assert len(eq) >= 360
-    turned = geometry.from_rotation(geometry.rot_z(np.radians(13.0))[:3, :3], com - geometry.rot_z(
-        np.radians(13.0))[:3, :3] @ com)
+    turned = geometry.from_rotation(
+        geometry.rot_z(np.radians(13.0))[:3, :3], com - geometry.rot_z(np.radians(13.0))[:3, :3] @ com
+    )
     err = pose_error(turned, np.eye(4), right=eq)  # 13 deg about the axis: the same tube
     assert err.position_mm < 0.01 and err.angle_deg < 0.6
     assert pose_error(geometry.from_rpy(0.2, 0, 0), np.eye(4), right=eq).angle_deg > 5.0  # tilted: not the same

@@ -91,12 +91,26 @@ def test_fingers_close_together_and_centre_an_off_centre_part() -> None:
 
 def test_peg_drops_into_its_half_millimetre_clearance_hole() -> None:
     """Exact convex pieces and thin contact margins: parts rest on the table and a peg enters its hole."""
-    block = build_part(PartSpec(name="block", solid=SolidSpec(
-        add=[Primitive(shape="box", size=[0.08, 0.06, 0.04], pose={"xyz": [0, 0, 0.02]})],
-        subtract=[Primitive(shape="cylinder", radius=0.0105, height=0.05, pose={"xyz": [0, 0, 0.04]})])))
-    peg = build_part(PartSpec(name="peg", solid=SolidSpec(
-        add=[Primitive(shape="cylinder", radius=0.010, height=0.03, pose={"xyz": [0, 0, 0.015]}),
-             Primitive(shape="box", size=[0.04, 0.04, 0.03], pose={"xyz": [0, 0, 0.045]})])))
+    block = build_part(
+        PartSpec(
+            name="block",
+            solid=SolidSpec(
+                add=[Primitive(shape="box", size=[0.08, 0.06, 0.04], pose={"xyz": [0, 0, 0.02]})],
+                subtract=[Primitive(shape="cylinder", radius=0.0105, height=0.05, pose={"xyz": [0, 0, 0.04]})],
+            ),
+        )
+    )
+    peg = build_part(
+        PartSpec(
+            name="peg",
+            solid=SolidSpec(
+                add=[
+                    Primitive(shape="cylinder", radius=0.010, height=0.03, pose={"xyz": [0, 0, 0.015]}),
+                    Primitive(shape="box", size=[0.04, 0.04, 0.03], pose={"xyz": [0, 0, 0.045]}),
+                ]
+            ),
+        )
+    )
     with NextagePyBullet({}) as robot:
         T_block = _rz(0.3)
         T_block[:3, 3] = [0.40, -0.30, 0.0]
@@ -124,8 +138,9 @@ def test_trajectory_checks() -> None:
         bad = q0.copy()
         bad[2] = 0.4
         with pytest.raises(UserError, match="outside its limits"):
-            robot.check_trajectory(Trajectory(arm="left", joint_names=names, times=[0.0, 5.0],
-                                              positions=np.stack([q0, bad])))
+            robot.check_trajectory(
+                Trajectory(arm="left", joint_names=names, times=[0.0, 5.0], positions=np.stack([q0, bad]))
+            )
         with pytest.raises(UserError, match="expected"):
             robot.check_trajectory(Trajectory(arm="left", joint_names=names[::-1], times=[0.0], positions=q0[None]))
 

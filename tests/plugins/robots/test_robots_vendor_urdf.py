@@ -181,8 +181,10 @@ def test_our_primitives_cover_the_vendors_meshes(vendor_urdf_path: Path) -> None
             if type(p.geometry).__name__ == "Box":
                 q = np.abs(loc) - np.asarray(p.geometry.halfSide)
             else:
-                q = np.stack([np.linalg.norm(loc[:, :2], axis=1) - p.geometry.radius,
-                              np.abs(loc[:, 2]) - p.geometry.halfLength], axis=1)
+                q = np.stack(
+                    [np.linalg.norm(loc[:, :2], axis=1) - p.geometry.radius, np.abs(loc[:, 2]) - p.geometry.halfLength],
+                    axis=1,
+                )
             best = np.minimum(best, np.linalg.norm(np.maximum(q, 0.0), axis=1))
         worst[link] = float(best.max())
     assert len(worst) == 16

@@ -81,7 +81,8 @@ def test_bad_inputs_exit_2_with_clear_message(tmp_path: Path, capsys: pytest.Cap
     small.mkdir()
     cv2.imwrite(str(small / "f.png"), np.zeros((480, 640, 3), np.uint8))
     assert "frame 0 is 640x480 pixels but the camera intrinsics are for 1280x720" in _err(
-        ["teach", str(cfg), "--frames", str(small), "--out", out], capsys)
+        ["teach", str(cfg), "--frames", str(small), "--out", out], capsys
+    )
     bad_video = tmp_path / "broken.mp4"
     bad_video.write_bytes(b"not a video")
     assert "cannot open the video" in _err(["teach", str(cfg), "--frames", str(bad_video), "--out", out], capsys)
@@ -90,16 +91,33 @@ def test_bad_inputs_exit_2_with_clear_message(tmp_path: Path, capsys: pytest.Cap
     raw["part_a"]["markers"][0]["dictionary"] = "DICT_4X4_51"
     (tmp_path / "dict.yaml").write_text(yaml.safe_dump(raw))
     assert "unknown ArUco dictionary 'DICT_4X4_51'" in _err(
-        ["teach", str(_config(tmp_path, structure=tmp_path / "dict.yaml", name="c2.yaml")), "--frames", str(blank),
-         "--out", out], capsys)
+        [
+            "teach",
+            str(_config(tmp_path, structure=tmp_path / "dict.yaml", name="c2.yaml")),
+            "--frames",
+            str(blank),
+            "--out",
+            out,
+        ],
+        capsys,
+    )
     raw = yaml.safe_load(PEG.read_text())
     raw["part_b"]["markers"][0]["id"] = 1
     (tmp_path / "dup.yaml").write_text(yaml.safe_dump(raw))
     assert "marker ids [1] are used on both" in _err(
-        ["teach", str(_config(tmp_path, structure=tmp_path / "dup.yaml", name="c3.yaml")), "--frames", str(blank),
-         "--out", out], capsys)
+        [
+            "teach",
+            str(_config(tmp_path, structure=tmp_path / "dup.yaml", name="c3.yaml")),
+            "--frames",
+            str(blank),
+            "--out",
+            out,
+        ],
+        capsys,
+    )
     assert "demo.frame: unknown key" in _err(
-        ["render-demo", str(_config(tmp_path, {"frame": 3}, name="c4.yaml")), "--out", str(tmp_path / "o")], capsys)
+        ["render-demo", str(_config(tmp_path, {"frame": 3}, name="c4.yaml")), "--out", str(tmp_path / "o")], capsys
+    )
 
 
 @pytest.mark.slow

@@ -104,8 +104,9 @@ def _scene(n_frames: int = 6, seed: int = 3) -> tuple[list[np.ndarray], list[tup
     """Frames of two 4-corner-square pairs per part, noise-free corners; returns (T_cam_A, data, dist)."""
     rng = np.random.default_rng(seed)
     sq = np.array([[-0.01, 0.01, 0.0], [0.01, 0.01, 0.0], [0.01, -0.01, 0.0], [-0.01, -0.01, 0.0]])
-    obj_a = np.concatenate([sq + np.array([0.0, 0.0, 0.02]),
-                            sq @ geometry.from_rpy(0.3, 0, 0)[:3, :3].T + np.array([0.03, 0, 0])])
+    obj_a = np.concatenate(
+        [sq + np.array([0.0, 0.0, 0.02]), sq @ geometry.from_rpy(0.3, 0, 0)[:3, :3].T + np.array([0.03, 0, 0])]
+    )
     obj_b = np.concatenate([sq + np.array([0.0, 0.0, 0.03]), sq + np.array([0.0, 0.025, 0.03])])
     dist = np.array(DISTS["5"])
     poses, data = [], []

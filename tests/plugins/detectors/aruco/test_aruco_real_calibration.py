@@ -22,11 +22,26 @@ def _reference(real_data: Path) -> tuple[np.ndarray, float]:
         fs.release()
 
 
-def test_chessboard_calibration_matches_opencv_reference(real_data: Path, tmp_path: Path,
-                                                          capsys: pytest.CaptureFixture[str]) -> None:
+def test_chessboard_calibration_matches_opencv_reference(
+    real_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     out = tmp_path / "left.yaml"
-    argv = ["calibrate", "--images", str(real_data / "real/chessboard"), "--out", str(out), "--board", "chessboard",
-            "--cols", "9", "--rows", "6", "--square", "0.025", "--fix-aspect"]
+    argv = [
+        "calibrate",
+        "--images",
+        str(real_data / "real/chessboard"),
+        "--out",
+        str(out),
+        "--board",
+        "chessboard",
+        "--cols",
+        "9",
+        "--rows",
+        "6",
+        "--square",
+        "0.025",
+        "--fix-aspect",
+    ]
     assert main(argv) == 0
     text = capsys.readouterr().out
     K_ref, rms_ref = _reference(real_data)
@@ -47,15 +62,29 @@ def test_chessboard_calibration_matches_opencv_reference(real_data: Path, tmp_pa
     assert png.reshape(-1, 3).std(axis=0).max() > 5  # corners drawn, not a blank canvas
 
 
-def test_unreadable_board_photos_are_named_and_none_is_an_error(real_data: Path, tmp_path: Path,
-                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+def test_unreadable_board_photos_are_named_and_none_is_an_error(
+    real_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     folder = tmp_path / "photos"
     folder.mkdir()
     for name in ("left01.jpg", "left03.jpg", "left04.jpg", "left05.jpg"):
         (folder / name).symlink_to(real_data / "real/chessboard" / name)
     cv2.imwrite(str(folder / "wall.png"), np.full((480, 640, 3), 128, np.uint8))
-    argv = ["calibrate", "--images", str(folder), "--out", str(tmp_path / "c.yaml"), "--board", "chessboard",
-            "--cols", "9", "--rows", "6", "--square", "0.025"]
+    argv = [
+        "calibrate",
+        "--images",
+        str(folder),
+        "--out",
+        str(tmp_path / "c.yaml"),
+        "--board",
+        "chessboard",
+        "--cols",
+        "9",
+        "--rows",
+        "6",
+        "--square",
+        "0.025",
+    ]
     assert main(argv) == 0
     text = capsys.readouterr().out
     assert "wall.png: board not found, skipped" in text and "4/5" in text and "fx, fy free" in text

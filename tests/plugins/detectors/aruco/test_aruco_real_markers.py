@@ -91,8 +91,9 @@ def _printed_id(grey: np.ndarray, corners: np.ndarray, dictionary: str) -> int |
     d = get_dictionary(dictionary)
     cells = d.markerSize + 2
     side = 12 * cells
-    H = cv2.getPerspectiveTransform(corners.astype(np.float32),
-                                    np.float32([[0, 0], [side, 0], [side, side], [0, side]]))
+    H = cv2.getPerspectiveTransform(
+        corners.astype(np.float32), np.float32([[0, 0], [side, 0], [side, side], [0, side]])
+    )
     warp = cv2.warpPerspective(grey, H, (side, side))
     # Mean of the middle half of each cell: blur and the exact corner positions matter little there.
     means = warp.reshape(cells, 12, cells, 12)[:, 3:9, :, 3:9].mean(axis=(1, 3)).astype(np.uint8)
@@ -107,13 +108,17 @@ def _printed_id(grey: np.ndarray, corners: np.ndarray, dictionary: str) -> int |
     return best if dist[best] <= 2 and dist[int(order[1])] > dist[best] else None
 
 
-@pytest.mark.parametrize("photo, dictionary, expected", [
-    ("singlemarkersoriginal.jpg", "DICT_6X6_250", {23, 40, 62, 98, 124, 203}),
-    ("choriginal.jpg", "DICT_6X6_250", set(range(17))),
-    ("screen_charuco.jpg", "DICT_4X4_50", None),
-])
-def test_ids_on_real_photos_are_the_printed_ones(real_data: Path, photo: str, dictionary: str,
-                                                 expected: set[int] | None) -> None:
+@pytest.mark.parametrize(
+    "photo, dictionary, expected",
+    [
+        ("singlemarkersoriginal.jpg", "DICT_6X6_250", {23, 40, 62, 98, 124, 203}),
+        ("choriginal.jpg", "DICT_6X6_250", set(range(17))),
+        ("screen_charuco.jpg", "DICT_4X4_50", None),
+    ],
+)
+def test_ids_on_real_photos_are_the_printed_ones(
+    real_data: Path, photo: str, dictionary: str, expected: set[int] | None
+) -> None:
     img = cv2.imread(str(real_data / "real/aruco" / photo))
     grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
     found = MarkerDetector([dictionary], refine="none").detect(img)

@@ -79,8 +79,15 @@ def test_edge_refinement_limit_follows_the_measured_edge_noise() -> None:
     assert len(adaptive) >= 5 and max(adaptive) < 0.2, adaptive
 
 
-def _obs(marker_id: int, size: float, T_part_marker: np.ndarray, T_cam_part: np.ndarray, K: np.ndarray,
-         dist: np.ndarray, rng: np.random.Generator) -> MarkerObservation:
+def _obs(
+    marker_id: int,
+    size: float,
+    T_part_marker: np.ndarray,
+    T_cam_part: np.ndarray,
+    K: np.ndarray,
+    dist: np.ndarray,
+    rng: np.random.Generator,
+) -> MarkerObservation:
     o = MarkerObservation(marker_id, size, T_part_marker, np.zeros((4, 2)))
     px = project(T_cam_part, o.object_points, K, dist) + rng.normal(0.0, 0.01, (4, 2))
     return MarkerObservation(marker_id, size, T_part_marker, px)
@@ -112,10 +119,14 @@ def test_joint_adjustment_drops_a_frame_not_at_the_assembled_pose() -> None:
     K, dist = cam.K, cam.dist_array
     rng = np.random.default_rng(5)
     facing = geometry.from_rpy(np.pi, 0.0, 0.0)
-    markers_a = [(1, geometry.from_rotation(np.eye(3), [-0.02, 0.0, 0.0])),
-                 (2, geometry.from_rotation(np.eye(3), [0.02, 0.0, 0.0]))]
-    markers_b = [(3, geometry.from_rpy(0.3, 0.0, 0.0, [0.0, -0.01, 0.03])),
-                 (4, geometry.from_rpy(-0.3, 0.0, 0.0, [0.0, 0.01, 0.03]))]
+    markers_a = [
+        (1, geometry.from_rotation(np.eye(3), [-0.02, 0.0, 0.0])),
+        (2, geometry.from_rotation(np.eye(3), [0.02, 0.0, 0.0])),
+    ]
+    markers_b = [
+        (3, geometry.from_rpy(0.3, 0.0, 0.0, [0.0, -0.01, 0.03])),
+        (4, geometry.from_rpy(-0.3, 0.0, 0.0, [0.0, 0.01, 0.03])),
+    ]
     T_A_B = geometry.from_rpy(0.0, 0.0, 0.2, [0.002, -0.001, 0.02])
     frames = []
     for i in range(10):
@@ -126,8 +137,16 @@ def test_joint_adjustment_drops_a_frame_not_at_the_assembled_pose() -> None:
         T_cam_B = T_cam_A @ T_ab
         obs_a = [_obs(m, 0.016, T, T_cam_A, K, dist, rng) for m, T in markers_a]
         obs_b = [_obs(m, 0.016, T, T_cam_B, K, dist, rng) for m, T in markers_b]
-        frames.append(FrameResult(i, PartPose(T_cam_A, 0.05, [1, 2], [0.05] * 2),
-                                  PartPose(T_cam_B, 0.05, [3, 4], [0.05] * 2), obs_a, obs_b, T_ab))
+        frames.append(
+            FrameResult(
+                i,
+                PartPose(T_cam_A, 0.05, [1, 2], [0.05] * 2),
+                PartPose(T_cam_B, 0.05, [3, 4], [0.05] * 2),
+                obs_a,
+                obs_b,
+                T_ab,
+            )
+        )
     start = T_A_B @ geometry.from_rpy(0.01, -0.01, 0.0, [0.001, 0.001, 0.001])
     T, note, kept = ArucoTeacher({}, seed=0)._joint_refine(frames, start, cam)
     assert [r.index for r in kept] == [0, 1, 3, 4, 5, 6, 7, 8, 9], note
