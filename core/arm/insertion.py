@@ -20,6 +20,10 @@ real cell inserts force-guided instead; :func:`guarded_insert` does the same on 
 - still resisted after the search's first shifts (a tilt, not a lateral miss), it turns the hand with the
   contact torque about the part's leading end before each shift, as a compliant wrist yields
   (:class:`~asmteach.core.arm.compliance.TorqueTurn`, bounded per turn and in all);
+- still resisted once the shifts and turns are spent, it twists the hand about the line itself, a little more
+  each time, one sense then the other (:class:`~asmteach.core.arm.compliance.TwistSearch`): a part rolled
+  about the line (a T-slider's flange) meets the mouth with a corner whose straight-back push has no moment
+  about the line to turn it by;
 - it watches the other part: how far it moved while the part came in, and when; the other part pushed more
   than ``other_moved_m`` since the last correction is resistance too (a light part slides on the table
   before any force builds up);
@@ -40,7 +44,15 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from asmteach.core import geometry
-from asmteach.core.arm.compliance import TorqueTurn, TurnSettings, giving_back, torque_about, turn_about
+from asmteach.core.arm.compliance import (
+    TorqueTurn,
+    TurnSettings,
+    TwistSearch,
+    TwistSettings,
+    giving_back,
+    torque_about,
+    turn_about,
+)
 from asmteach.core.arm.insertion_search import PushSearch, perpendicular, spiral
 from asmteach.core.models import Trajectory
 
@@ -97,7 +109,8 @@ class InsertionSettings:
     it backs out before a sideways correction; ``search_step_m`` and ``search_radius_m``: size of one sideways
     correction and the farthest it shifts the line; ``max_tries``: corrections before it gives up (a jam);
     ``other_moved_m``: the other part pushed this far is resistance; ``turn``: the torque-guided turns tried at
-    each resistance before a sideways shift (:mod:`asmteach.core.arm.compliance`).
+    each resistance before a sideways shift; ``twist``: the search about the line once shifts and turns are
+    spent (:mod:`asmteach.core.arm.compliance`).
     """
 
     step_m: float = 0.0005
@@ -111,6 +124,7 @@ class InsertionSettings:
     max_tries: int = 16
     other_moved_m: float = 0.0005
     turn: TurnSettings = field(default_factory=TurnSettings)
+    twist: TwistSettings = field(default_factory=TwistSettings)
 
 
 @dataclass
@@ -159,6 +173,9 @@ class InsertionOutcome:
     """The torque-guided turns (degrees each) and the world transform they applied to the line's TCP poses."""
     given_back_deg: float = 0.0
     """How much of the turns the hand took back once the part was home (degrees; :attr:`TurnSettings.give_back`)."""
+    twist_deg: float = 0.0
+    """The twist about the insertion line the part went in with (degrees, signed about the line's direction; 0:
+    none was needed; :class:`~asmteach.core.arm.compliance.TwistSearch`)."""
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready, in millimetres (the execution trace's unit)."""
@@ -186,6 +203,7 @@ class InsertionOutcome:
             "turns_deg": [round(a, 2) for a in self.turns_deg],
             "turned_deg": round(float(np.degrees(geometry.rotation_angle(self.T_turn[:3, :3]))), 2),
             "given_back_deg": round(self.given_back_deg, 2),
+            "twist_deg": round(self.twist_deg, 2),
             "reason": self.reason,
         }
 
@@ -320,6 +338,22 @@ class _Guard:
         )
 
 
+def _twist(
+    g: _Guard, pos: float, slip: float, offset: np.ndarray, R_turns: np.ndarray, R_twist: np.ndarray
+) -> tuple[float, np.ndarray]:
+    """Back off from a resistance at ``pos`` (``slip`` the part's in the hand), then turn the hand to the twist
+    ``R_twist`` about the line (3x3, world) after the turns ``R_turns``, shifted by ``offset``:
+    ``(where along the line it stands now, the twist it holds)``; with no IK for the twist, the untwisted hand."""
+    pos = max(0.0, pos - g.s.backoff_m - slip)
+    g.move_to(g.pose_at(pos, offset))
+    g.R_turn = R_turns @ R_twist
+    if not g.move_to(g.pose_at(pos, offset)):
+        R_twist = np.eye(3)
+        g.R_turn = R_turns
+    g.settle_other()
+    return pos, R_twist
+
+
 def _give_back(g: _Guard, pos: float, offset: np.ndarray) -> float:
     """The part home with the hand turned: turn the hand back toward the line's planned orientation about the
     compliance centre, a step at a time, as a compliant wrist lets the guide straighten the part once it is
@@ -401,6 +435,9 @@ def guarded_insert(
     pos, best_depth, tries, spiral_k = 0.0, 0.0, 0, 0
     search = PushSearch(s.search_step_m, s.search_radius_m)
     turner = TorqueTurn(s.turn)
+    twister, R_twist = TwistSearch(s.twist), np.eye(3)
+    stuck_at: float | None = None  # while twists are tried: the depth the part stuck at before them
+    twist_origin, twist_shifts = np.zeros(3), 0  # the offset each twist starts from, and the shifts it has left
     steps = max(1, int(np.ceil(g.length / s.step_m)))
     while True:
         target = min(g.length, pos + g.length / steps)
@@ -420,23 +457,54 @@ def guarded_insert(
             out.inserted = True  # it met the seat (a blind hole's bottom, a stop) where the plan ends
             break
         out.contacts.append(InsertionContact(depth, force, slip, g.seconds, float(np.linalg.norm(offset))))
+        if stuck_at is not None and depth > stuck_at + s.twist.gain_m:
+            # the twist took the part past where it stuck: keep it, and search from here as at the start
+            stuck_at, twister.kept_deg = None, twister.tried[-1]
+            tries, spiral_k = 0, 0
+            search, turner = PushSearch(s.search_step_m, s.search_radius_m), TorqueTurn(s.turn)
+        if stuck_at is not None:
+            new = search.next(offset, away) if twist_shifts > 0 else None
+            if new is not None and np.linalg.norm(new) <= s.search_radius_m:
+                # a few shifts at each twist: the front's edge on the mouth's edge, once the roll is out of it
+                twist_shifts -= 1
+                pos, offset = max(0.0, pos - s.backoff_m - slip), new
+                g.move_to(g.pose_at(pos, offset))
+                g.settle_other()
+                continue
+            angle = twister.next()
+            if angle is None:
+                out.reason = f"still resisted after {s.max_tries} sideways corrections"
+                break
+            offset, search, twist_shifts = twist_origin, PushSearch(s.search_step_m, s.search_radius_m), s.twist.shifts
+            pos, R_twist = _twist(g, pos, slip, offset, turner.R, TwistSearch.rotation(angle, g.d))
+            continue
         # the sideways search first (a lateral miss); still resisted after its shifts: a tilt, turn from then on
         turn = turner.next(g.torque()) if len(out.contacts) > s.turn.after_shifts else False
         tries += not turn
         if tries > s.max_tries:
-            out.reason = f"still resisted after {s.max_tries} sideways corrections"
-            break
+            angle = twister.next() if not twister.tried else None
+            if angle is None:
+                out.reason = f"still resisted after {s.max_tries} sideways corrections"
+                break
+            # shifts and turns spent: twist about the line from where the shifts began, the turns taken back
+            # (they followed a straight-back push's moment, which says nothing about a roll)
+            stuck_at = best_depth
+            twist_origin = search.origin.copy() if search.origin is not None else offset.copy()
+            offset, search, twist_shifts = twist_origin, PushSearch(s.search_step_m, s.search_radius_m), s.twist.shifts
+            turner = TorqueTurn(s.turn)
+            pos, R_twist = _twist(g, pos, slip, offset, turner.R, TwistSearch.rotation(angle, g.d))
+            continue
         # back off (the hand's spring lets go of the part), then turn the hand or shift the line sideways
         pos = max(0.0, pos - s.backoff_m - slip)
         g.move_to(g.pose_at(pos, offset))
-        g.R_turn = turner.R
+        g.R_turn = turner.R @ R_twist
         if turn:  # yield to the contact's torque, as a compliant wrist would, and advance again
             if turner.tried == 1 and search.origin is not None:
                 offset = search.origin.copy()  # the shifts changed nothing: back to where they began
             if g.move_to(g.pose_at(pos, offset)):
                 g.settle_other()
                 continue
-            g.R_turn = turner.unreached()  # no IK for the turned hand: this resistance goes to the sideways search
+            g.R_turn = turner.unreached() @ R_twist  # no IK for the turned hand: this resistance goes to the search
             tries += 1
         new = search.next(offset, away)
         if new is None:
@@ -453,13 +521,16 @@ def guarded_insert(
             out.reason = "no IK for the sideways correction"
             break
         g.settle_other()
-    if out.inserted and turner.steps_deg and s.turn.give_back:
+    if out.inserted and stuck_at is not None:
+        twister.kept_deg = twister.tried[-1]  # the twist tried last took the part home
+    out.twist_deg = twister.kept_deg
+    if out.inserted and (turner.steps_deg or twister.kept_deg) and s.turn.give_back:
         out.given_back_deg = _give_back(g, pos, offset)
     out.depth_m = best_depth if not out.inserted else max(best_depth, g.reading(pos, offset)[2])
     out.correction_m = offset
     out.turns_deg, out.T_turn = list(turner.steps_deg), g.turn(g.pose_at(g.length, offset))
     if not out.inserted:
-        out.reason += turner.note()
+        out.reason += turner.note() + twister.note()
     out.seconds = g.seconds
     out.other_moved_m, out.other_moved_t_s = g.other_moved, g.other_moved_t
     return out

@@ -273,7 +273,7 @@ def _insert(run: Run, robot: Robot, seg: Any, trace: ExecutionTrace, aim: dict[s
     outcome = guarded_insert(robot, seg.trajectory, part, other, line_end=line_end, centre_tcp=centre)
     reaimed = line_end is not None and (outcome.realigned_mm > 0.0 or outcome.realigned_deg > 0.0)
     C = line_end @ geometry.invert(T_end) if reaimed and line_end is not None else np.eye(4)
-    if reaimed or outcome.turns_deg:  # the retreat leaves the way the hand went in: re-aimed and turned
+    if reaimed or outcome.turns_deg or outcome.twist_deg:  # the retreat leaves the way the hand went in
         aim[arm] = outcome.T_turn @ C
     trace.insertion(seg.label, part, other, outcome, robot.fk(arm, q[0]), robot.fk(arm, q[-1]))
     if not outcome.inserted:

@@ -18,7 +18,15 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from asmteach.core import geometry
-from asmteach.core.arm.compliance import TorqueTurn, TurnSettings, leading_point, torque_about, turn_about
+from asmteach.core.arm.compliance import (
+    TorqueTurn,
+    TurnSettings,
+    TwistSearch,
+    TwistSettings,
+    leading_point,
+    torque_about,
+    turn_about,
+)
 from asmteach.core.arm.insertion import InsertionSettings, PartContact, guarded_insert
 from asmteach.core.arm.sim import PyBulletWorld, pb_to_pose, pose_to_pb
 from asmteach.core.interfaces import IKResult, PartModel
@@ -124,14 +132,22 @@ def _part(name: str, mesh: Any) -> PartModel:
 
 
 def _slide(
-    turn: bool, tilt_deg: float = 1.5, pivot: str = "lead", settings: TurnSettings | None = None
+    turn: bool,
+    tilt_deg: float = 1.5,
+    pivot: str = "lead",
+    settings: TurnSettings | None = None,
+    family: str = "dovetail_slide",
+    index: int = 0,
+    roll_deg: float = 0.0,
+    twist: TwistSettings | None = None,
 ) -> tuple[object, float]:
     """gen_dovetail_slide_s0_0's slider (0.46 mm play) pushed along its 52 mm groove from 5 mm out, held
     ``tilt_deg`` about the vertical off where the line expects it, turned about its front end (``pivot``
     "lead": the line puts that in the groove's mouth) or about the TCP ("tcp": the front lands beside the
     mouth); ``settings`` replaces the turns' (``turn`` then unused): ``(outcome, the slider's angle off the groove
-    at the end in degrees)``."""
-    gs = generate_structure("dovetail_slide", seed=0, index=0)
+    at the end in degrees)``. ``family`` / ``index`` take another generated slide, ``roll_deg`` rolls the slider
+    about the line too (about its front end), ``twist`` replaces the twist search's settings."""
+    gs = generate_structure(family, seed=0, index=index)
     a, b = _part("block", gs.part_a), _part("slider", gs.part_b)
     v = np.asarray(gs.v_a, float)  # A stands at the world origin: its frame is the world's
     T_goal = np.asarray(gs.T_A_B, float)
@@ -145,7 +161,11 @@ def _slide(
     centre = leading_point(verts, com, T_tcp0[:3, :3].T @ v)  # in the TCP frame, from the slider's model
     lead = T_tcp0[:3, :3] @ centre + T_tcp0[:3, 3]
     pivot_world = lead if pivot == "lead" else T_tcp0[:3, 3]
-    held = turn_about(geometry.from_rpy(0.0, 0.0, np.radians(tilt_deg))[:3, :3], pivot_world) @ T_pre
+    R_off = (
+        geometry.from_rotvec(np.radians(roll_deg) * v)[:3, :3]
+        @ geometry.from_rpy(0.0, 0.0, np.radians(tilt_deg))[:3, :3]
+    )
+    held = turn_about(R_off, pivot_world) @ T_pre
     world = PyBulletWorld(Path(pybullet_data_path()) / "plane.urdf", np.eye(4))
     try:
         world.spawn_part("block", a, np.eye(4))
@@ -159,7 +179,7 @@ def _slide(
             times=[0.0, 2.0],
             positions=np.vstack([hand.current(""), hand._q(T_end)]),
         )
-        s = replace(InsertionSettings(), turn=settings or TurnSettings(enabled=turn))
+        s = replace(InsertionSettings(), turn=settings or TurnSettings(enabled=turn), twist=twist or TwistSettings())
         out = guarded_insert(hand, traj, "slider", "block", settings=s, centre_tcp=centre)
         off = float(np.degrees(geometry.rotation_distance(world.part_pose("slider"), T_goal)))
         return out, off
@@ -210,3 +230,28 @@ def test_turns_the_guide_did_not_need_are_given_back_once_the_slider_is_home() -
     assert kept.inserted and kept.given_back_deg == 0.0 and kept_off > 2.0
     needed, needed_off = _slide(turn=True, tilt_deg=3.0)
     assert needed.inserted and needed.given_back_deg < 0.5 and needed_off < 1.2
+
+
+def test_the_twists_alternate_in_sense_and_grow_to_their_bound() -> None:
+    twister = TwistSearch(TwistSettings(step_deg=0.5, max_deg=1.5))
+    assert [twister.next() for _ in range(7)] == [0.5, -0.5, 1.0, -1.0, 1.5, -1.5, None]
+    assert "1.5 deg either way" in twister.note()
+    assert TwistSearch(TwistSettings(enabled=False)).next() is None
+    R = TwistSearch.rotation(90.0, np.array([0.0, 0.0, 2.0]))
+    assert np.allclose(R @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+
+
+def test_a_t_slider_rolled_about_its_slot_goes_in_only_with_the_twist_search() -> None:
+    """gen_t_slot_slide_s0_1 (the sweep's t_slot 1: 0.85 mm of play over the 30.7 mm flange, so 1.6 deg of roll
+    at most) held rolled 2.2 deg about the slot's line, as the structure trials' slider came to its mouth (the
+    taught pose 3.1 deg off about that line, the regrasp 1.3 deg back): its flange's corner rests on the mouth's
+    edge, no shift frees it and the turns, following the straight-back push's moment, do not roll it. The twist
+    search about the line does."""
+    out, off = _slide(turn=True, tilt_deg=0.0, family="t_slot_slide", index=1, roll_deg=2.2)
+    assert out.inserted, out.reason
+    assert out.twist_deg < 0.0  # back against the roll
+    assert off < 1.7  # within the flange's play
+    stuck, _ = _slide(
+        turn=True, tilt_deg=0.0, family="t_slot_slide", index=1, roll_deg=2.2, twist=TwistSettings(enabled=False)
+    )
+    assert not stuck.inserted and stuck.depth_m < 0.01 and stuck.twist_deg == 0.0
