@@ -84,10 +84,11 @@ class RefineSettings(StrictModel):
     icp_iterations: int = Field(30, ge=1, description="iterations per ICP pass")
     visible_icp: bool = Field(
         True,
-        description="ICP registers onto the model surface the camera sees at each pass's start (icp_refine's "
+        description="the fine ICP pass registers onto the model surface the camera sees at its start (icp_refine's "
         "viewpoint; the detector passes its camera centre), not the whole model: a seen wall pairs with none "
         "behind it (a cup turned over); corpus, session 17: found 169 -> 171 of 245 with one view, 200 -> 203 "
-        "with two, 0 wrong",
+        "with two, 0 wrong. The coarse pass keeps the whole model: from a start tens of degrees off, the surface "
+        "seen at the start is not the one seen at the truth (session 18: a keyed peg tilted 55 deg)",
     )
     inlier_distance: float = Field(
         0.004,
@@ -213,17 +214,25 @@ def icp_refine(
 
     The coarse pass (wide correspondence distance) pulls a hypothesis in; the
     fine pass (narrow) ignores what is not the part's surface. With ``viewpoint`` (the camera centre,
-    world, metres) each pass registers onto the model surface the camera can see at the pass's starting
+    world, metres) the fine pass registers onto the model surface the camera can see at its starting
     pose only (:func:`visible_samples`): a seen point near a wall the camera cannot see (the inside of a
     cup turned over, 2-3 mm behind its outside) otherwise pairs with it and pulls the pose off.
+
+    The coarse pass registers onto the whole model, viewpoint or not: it starts from a hypothesis that
+    may be tens of degrees off, where the surface the camera would see is not the one it saw (a keyed peg
+    tilted 55 deg onto an edge shows its head's underside and hides the top the camera saw), and the
+    seen points, left without their faces, pulled the pose into a wrong minimum (19 mm / 88 deg off, half
+    a centimetre into the table) that the whole model's coarse pass leaves for the truth.
     """
     src = to_o3d(cluster)
     T = geometry.invert(T_world_part)  # ICP moves the cluster into the part frame
-    passes = [d for d, on in ((s.icp_coarse_distance, coarse), (s.icp_fine_distance, fine)) if on]
+    passes = [
+        (d, seen) for d, on, seen in ((s.icp_coarse_distance, coarse, False), (s.icp_fine_distance, fine, True)) if on
+    ]
     with one_thread():
-        for dist in passes:
+        for dist, seen in passes:
             target = model.pcd
-            if viewpoint is not None:
+            if seen and viewpoint is not None:
                 keep = visible_samples(model, geometry.transform_points(T, np.asarray(viewpoint, float)[None])[0])
                 if keep.sum() >= 10:
                     target = model.pcd.select_by_index(np.flatnonzero(keep).tolist())
