@@ -37,7 +37,8 @@ from asmteach.core import geometry
 from asmteach.core.models import StrictModel, TablePlane
 from asmteach.core.perception.depth_camera import KinectSettings, look_at
 from asmteach.core.perception.registration import ModelCloud, RefineSettings, icp_refine, model_cloud
-from asmteach.core.perception.second_view import SecondViewSettings, axis_turns, range_sigma, screw_turns
+from asmteach.core.perception.rival_turns import axis_turns, screw_turns
+from asmteach.core.perception.second_view import SecondViewSettings, range_sigma
 from asmteach.core.pose_error import pose_error
 
 import open3d as o3d  # isort: skip  (after asmteach.core)
