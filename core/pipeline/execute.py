@@ -77,9 +77,7 @@ def execute_stage(run: Run, robot: Robot, plan: Plan, stage: str = "execute") ->
                 d["animation"] = f"not recorded: {type(robot).__name__} has no colour camera"
         task = run.report.task  # the plan may move B alone (after look_again): A is watched all the same
         parts = plan_parts(plan) + ([task.part_a.name, task.part_b.name] if task is not None else [])
-        believed = {
-            det.part: np.asarray(det.best) for det in run.report.detections if det.found and det.best is not None
-        }
+        believed = _believed(run)
         trace = ExecutionTrace(
             robot, list(dict.fromkeys(parts)), run.report.robot_seconds.get("total", 0.0), believed=believed
         )
@@ -120,6 +118,20 @@ def execute_stage(run: Run, robot: Robot, plan: Plan, stage: str = "execute") ->
         d["frames_recorded"] = len(frames)
         d["max_tracking_error_rad"] = trace.max_tracking_error
     return frames
+
+
+def _believed(run: Run) -> dict[str, np.ndarray]:
+    """Where the plan believes each part is as this stage begins (``T_world_part``, metres): its detection, and
+    for A where look_again saw it at its goal (``T_world_a_seen``). A held part is measured in the hand with the
+    other parts' points cut out at these poses: A's first detection, where it stood before it was carried to
+    its goal, left A's points beside the held part in the fit (t_slot 1 and 2: 67-72 % of the points on the
+    slider's surface, every look declined)."""
+    believed = {det.part: np.asarray(det.best) for det in run.report.detections if det.found and det.best is not None}
+    task = run.report.task
+    for st in run.report.stages:
+        if st.stage == "look_again" and task is not None and "T_world_a_seen" in st.details:
+            believed[task.part_a.name] = np.asarray(st.details["T_world_a_seen"], dtype=float)
+    return believed
 
 
 def _jig(run: Run, plan: Plan, d: dict) -> str | None:

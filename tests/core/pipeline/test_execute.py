@@ -113,3 +113,21 @@ def test_an_offset_the_look_cannot_tell_from_its_noise_runs_the_planned_line() -
     # gen_d_peg_s0_0 seed 8's look scored the belief 58 (and the truth 48): the look's own noise, not an offset
     assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4), measured, lambda T: 58.3) is None  # type: ignore[arg-type]
     assert execute._line_end(run, hand, "a", "peg", trace, np.eye(4), measured, lambda T: 500.0) is not None  # type: ignore[arg-type]
+
+
+def test_a_is_believed_where_look_again_saw_it_at_its_goal() -> None:
+    """The held part is measured with A's points cut out where A is believed to be: after look_again, that is
+    where A was seen at its goal, not where it was first detected (its start, far from the hand)."""
+    start, seen = geometry.from_rpy(0.0, 0.0, 0.3, [0.3, -0.2, 0.0]), geometry.from_rpy(0.0, 0.0, 0.0, [0.4, 0.0, 0.0])
+    det_a = SimpleNamespace(part="block", found=True, best=start)
+    det_b = SimpleNamespace(part="peg", found=True, best=np.eye(4))
+    report = SimpleNamespace(
+        detections=[det_a, det_b],
+        stages=[SimpleNamespace(stage="detect", details={})],
+        task=SimpleNamespace(part_a=SimpleNamespace(name="block")),
+    )
+    run = SimpleNamespace(report=report)
+    assert np.allclose(execute._believed(run)["block"], start)  # before A was carried: its detection
+    report.stages.append(SimpleNamespace(stage="look_again", details={"T_world_a_seen": seen.tolist()}))
+    believed = execute._believed(run)
+    assert np.allclose(believed["block"], seen) and np.allclose(believed["peg"], np.eye(4))
