@@ -31,7 +31,7 @@ from asmteach.core.perception.registration import (
 from asmteach.core.perception.viewpoint import StageClock
 from asmteach.core.symmetry.near import NearSymmetry
 from asmteach.plugins.detectors.cvfh.prescore import SampleIndex, near_shares, support_gap
-from asmteach.plugins.detectors.cvfh.resting import disagreement
+from asmteach.plugins.detectors.cvfh.resting import disagreement, snap_to_rest
 from asmteach.plugins.detectors.cvfh.settings import CvfhSettings
 from asmteach.plugins.detectors.cvfh.views import CloudDescription, ViewDatabase
 
@@ -42,6 +42,7 @@ __all__ = [
     "is_distinct",
     "near_twin_pass",
     "poses_apart",
+    "verify_at_rest",
     "verify_rounds",
     "view_hypotheses",
 ]
@@ -166,7 +167,7 @@ def verify_rounds(
                 break  # two verified poses are enough to pick the better of a near-symmetric pair
             T = job.icp(job.icp_in, prep.model, T1, s.refine, coarse=False)
             clock.lap("icp")
-            v = verify(T, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+            v = verify_at_rest(T, job, prep, s)
             clock.lap("verify")
             accepted += v.accepted
             if v.accepted and (best is None or v.score > best.score):
@@ -180,6 +181,25 @@ def verify_rounds(
     return best, closest, info
 
 
+def verify_at_rest(T_world_part: np.ndarray, job: ClusterJob, prep: Prepared, s: CvfhSettings) -> Verdict:
+    """:func:`verify` the refined pose; when rejected and within ``rest_snap_deg`` of a stable rest, verify it
+    again snapped onto that rest (:func:`snap_to_rest`), and keep the snapped verdict if accepted.
+
+    The paper's premise, a part lying at rest on the table, as a constraint after ICP: the points below
+    ``segment.min_height`` are cut off as table, and a part that loses much of its height there (a U bracket
+    15 mm tall turned over, its legs cut off half-way) leaves ICP free to tilt it. The snapped pose faces
+    the same checks; rivals in the twin passes get the same chance.
+    """
+    v = verify(T_world_part, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+    if v.accepted or s.rest_snap_deg <= 0.0 or not len(prep.rests):
+        return v
+    T, deg = snap_to_rest(T_world_part, prep.rests, prep.model, job.table)
+    if deg > s.rest_snap_deg:
+        return v
+    snapped = verify(T, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+    return snapped if snapped.accepted else v
+
+
 def hull_twin_pass(
     best: Verdict, job: ClusterJob, prep: Prepared, clock: StageClock, s: CvfhSettings
 ) -> tuple[Verdict, int, list[dict]]:
@@ -191,7 +211,7 @@ def hull_twin_pass(
     verified, undecided = 0, []
     for S in prep.twins:
         T = job.icp(job.icp_in, prep.model, best.T_world_part @ S, s.refine, coarse=False)
-        v = verify(T, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+        v = verify_at_rest(T, job, prep, s)
         clock.lap("verify")
         if not v.accepted:
             continue
@@ -250,7 +270,7 @@ def near_twin_pass(
         clock.lap("icp")
         if not is_distinct(T, tried, prep.own, s, same=prep.same):
             continue  # ICP pulled it back onto a pose already tried (or one with the same surface)
-        v = verify(T, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+        v = verify_at_rest(T, job, prep, s)
         clock.lap("verify")
         if v.accepted:
             found.append(v)

@@ -51,6 +51,7 @@ __all__ = [
     "hull_twins",
     "near_twins",
     "resting_hypotheses",
+    "snap_to_rest",
     "stable_rests",
     "table_frame",
 ]
@@ -115,12 +116,15 @@ def near_twins(
         F[:, 2] *= -1.0
     cands = [F @ C @ F.T for C in Rotation.create_group("O").as_matrix()]
     for k in range(3):
-        cands += [Rotation.from_rotvec(np.radians(a) * F[:, k]).as_matrix()
-                  for a in np.arange(step_deg, 360.0 - 1e-6, step_deg)]
+        cands += [
+            Rotation.from_rotvec(np.radians(a) * F[:, k]).as_matrix()
+            for a in np.arange(step_deg, 360.0 - 1e-6, step_deg)
+        ]
     pts, _ = trimesh.sample.sample_surface(mesh, samples, seed=0)
     scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
-                        o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
+    scene.add_triangles(
+        o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)), o3d.core.Tensor(np.asarray(mesh.faces, np.uint32))
+    )
     moved = np.einsum("cij,nj->cni", np.asarray(cands), pts - com) + com
     d = scene.compute_distance(o3d.core.Tensor(moved.reshape(-1, 3).astype(np.float32))).numpy()
     mean = d.reshape(len(cands), -1).mean(axis=1)
@@ -190,6 +194,30 @@ def resting_hypotheses(
         shift = np.array([c_t[0] - vis_t[0], c_t[1] - vis_t[1], 0.0])
         out.append((T_wt @ geometry.from_rotation(np.eye(3), shift) @ T_tw @ T, yaw))
     return out
+
+
+def snap_to_rest(
+    T_world_part: np.ndarray, rests: np.ndarray, model: ModelCloud, table: TablePlane
+) -> tuple[np.ndarray, float]:
+    """``(T_world_part at the nearest stable rest, the turn to it in degrees)``.
+
+    ``rests`` are :func:`stable_rests` (on z = 0 of the table frame). Of every rest turned about the table
+    normal, the one whose rotation is nearest the pose's; the model's bounding-box centre stays where the
+    pose puts it (in the table plane) and its lowest point is put on the table.
+    """
+    T_wt = table_frame(table)
+    T_tp = geometry.invert(T_wt) @ np.asarray(T_world_part, float)
+    best, best_deg = np.eye(3), np.inf
+    for rest in rests:
+        M = T_tp[:3, :3] @ rest[:3, :3].T  # Rz(yaw) for a pose exactly at this rest
+        R = geometry.rot_z(float(np.arctan2(M[1, 0], M[0, 0])))[:3, :3] @ rest[:3, :3]
+        deg = float(np.degrees(geometry.rotation_angle(R.T @ T_tp[:3, :3])))
+        if deg < best_deg:
+            best, best_deg = R, deg
+    centre = T_tp[:3, :3] @ model.center + T_tp[:3, 3]
+    t = centre - best @ model.center
+    t[2] -= float(np.min(model.hull_vertices @ best[2] + t[2]))
+    return T_wt @ geometry.from_rotation(best, t), best_deg
 
 
 @dataclass(frozen=True)

@@ -55,6 +55,14 @@ class CvfhSettings(StrictModel):
         description="rounds of icp_candidates resting hypotheses tried until one verifies: they are many (rests x "
         "yaws) and a part seen end-on ranks the right yaw low, since every yaw explains the face it shows",
     )
+    rest_snap_deg: float = Field(
+        10.0,
+        ge=0.0,
+        description="a refined pose verification rejects that is within this many degrees of one of the "
+        "part's stable rests (resting_poses of them) is verified again snapped onto that rest, on the table: "
+        "a part seen only above segment.min_height leaves ICP free to tilt (a U bracket 15 mm tall, its legs "
+        "half cut off: 7.7 deg off, rejected; at the rest 0.4 deg) (0: never)",
+    )
     twin_fit: float = Field(0.004, gt=0.0, description="a pose explains a point within this along its ray, metres")
     twin_off: float = Field(0.010, gt=0.0, description="a pose clearly fails a point beyond this along its ray")
     twin_min_points: int = Field(10, ge=1, description="points of evidence needed to tell hull twins apart")

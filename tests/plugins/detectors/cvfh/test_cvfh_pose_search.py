@@ -3,6 +3,8 @@ the same answer."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import trimesh
@@ -72,3 +74,49 @@ def test_cluster_icp_registers_onto_the_seen_surface_only_when_visible_icp_is_se
     assert job.icp(seen, model, T0, on) == pytest.approx(icp_refine(seen, model, T0, on, viewpoint=eye), abs=1e-12)
     assert job.icp(seen, model, T0, off) == pytest.approx(icp_refine(seen, model, T0, off), abs=1e-12)
     assert job.icp_passes == 4
+
+
+def test_a_tilted_pose_verification_rejects_is_accepted_snapped_onto_its_rest(tmp_path: Path) -> None:
+    """A U bracket turned over (15 mm tall: its legs half below the 7.5 mm table cut), its pose tilted 8 deg, as
+    ICP left it in structures trial bracket_on_block 3 seed 8 (3.5 mm / 7.7 deg): verification rejects it;
+    snapped onto the nearest stable rest it is the truth within 1 mm / 1 deg and accepted."""
+    from asmteach.core.parts import PartSpec, build_part
+    from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings, look_at
+    from asmteach.core.perception.registration import verify
+    from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
+    from asmteach.plugins.detectors.cvfh.pose_search import ClusterJob, verify_at_rest
+    from asmteach.plugins.detectors.cvfh.scenes import place_on_table, render_table_scene
+
+    top = trimesh.creation.box(extents=[0.0502, 0.0326, 0.00335])
+    top.apply_translation([0.0, 0.0, 0.0152 - 0.001675])
+    legs = [trimesh.creation.box(extents=[0.00335, 0.0326, 0.01185]) for _ in range(2)]
+    for sx, leg in zip((-1.0, 1.0), legs, strict=True):
+        leg.apply_translation([sx * 0.023425, 0.0, 0.005925])
+    (tmp_path / "u.stl").write_bytes(trimesh.boolean.union([top, *legs], engine="manifold").export(file_type="stl"))
+    part = build_part(PartSpec(name="u", mesh=str(tmp_path / "u.stl"), mesh_units="m"))
+    detector = CvfhIcpDetector({"views": {"cache_dir": str(tmp_path)}}, seed=0)
+    prep = detector._prep(part)
+    eye = np.array([1.05, 0.0, 0.75])
+    T = place_on_table(part.mesh, np.eye(4), 0.3, (0.42, 0.19))
+    scene = render_table_scene(
+        DepthCamera(KinectSettings(), seed=8), part.mesh, T, T_world_cam=look_at(eye, [0.45, 0.0, 0.0])
+    )
+    pts = scene.cloud[np.isfinite(scene.cloud).all(axis=1)]
+    near = np.linalg.norm(pts[:, :2] - T[:2, 3], axis=1) < 0.05
+    cluster, context = pts[near & (pts[:, 2] > 0.0075)], pts[np.linalg.norm(pts - T[:3, 3], axis=1) < 0.08]
+    from asmteach.core.models import TablePlane
+
+    job = ClusterJob(cluster, context, cluster, cluster, TablePlane(height=0.0), eye)
+    centre = geometry.transform_points(T, part.mesh.bounds.mean(axis=0)[None])[0]
+    # tilted 8 deg about world y through its centre and lifted 2 mm (a tilt alone, sunk into the table at one
+    # end and free of it at the other, verification lets through up to 8 deg here)
+    tilt = geometry.from_rotvec(np.radians(8.0) * np.array([0.0, 1.0, 0.0]))
+    T_off = geometry.from_rotation(np.eye(3), centre + np.array([0.0, 0.0, 0.002])) @ tilt
+    T_off = T_off @ geometry.from_rotation(np.eye(3), -centre) @ T
+    s = CvfhSettings()
+    assert not verify(T_off, cluster, context, eye, prep.model, s.refine, job.table).accepted
+    v = verify_at_rest(T_off, job, prep, s)
+    assert v.accepted
+    mm, deg = poses_apart(v.T_world_part, T, prep.own)
+    assert mm < 1.0 and deg < 1.0
+    assert not verify_at_rest(T_off, job, prep, CvfhSettings(rest_snap_deg=5.0)).accepted
