@@ -122,10 +122,10 @@ def execute_stage(run: Run, robot: Robot, plan: Plan, stage: str = "execute") ->
 
 def _believed(run: Run) -> dict[str, np.ndarray]:
     """Where the plan believes each part is as this stage begins (``T_world_part``, metres): its detection, and
-    for A where look_again saw it at its goal (``T_world_a_seen``). A held part is measured in the hand with the
-    other parts' points cut out at these poses: A's first detection, where it stood before it was carried to
-    its goal, left A's points beside the held part in the fit (t_slot 1 and 2: 67-72 % of the points on the
-    slider's surface, every look declined)."""
+    for A where look_again saw it at its goal (``T_world_a_seen``): a held part is measured in the hand with the
+    other parts' points cut out at these poses, and A's first detection is where it stood before it was carried
+    to its goal. (This alone did not make the t_slot looks' fit better: 72 % of the points on the slider's surface
+    either way, Session 18; what the other 28 % are is not traced.)"""
     believed = {det.part: np.asarray(det.best) for det in run.report.detections if det.found and det.best is not None}
     task = run.report.task
     for st in run.report.stages:
