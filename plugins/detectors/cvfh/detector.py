@@ -16,9 +16,10 @@ Pipeline (paper, "Rough detection using point cloud"), all in the world frame
    whether they rest on the table, refine the best with point-to-plane ICP
    (coarse on a subsample for ten, fine for the best four), and verify them
    (fitness, inlier RMSE, free-space violations, the model surface the
-   camera should see, support on the table: :func:`~asmteach.core.perception.registration.verify`); the
-   best verified one is the rough pose. When none verifies, the next ten
-   hypotheses get their turn (``max_rounds``);
+   camera should see, support on the table: :func:`~asmteach.core.perception.registration.verify`; a
+   rejected pose within ``rest_snap_deg`` of a stable rest is verified again snapped onto it:
+   :func:`~asmteach.plugins.detectors.cvfh.pose_search.verify_at_rest`); the best verified one is the
+   rough pose. When none verifies, the next ten hypotheses get their turn (``max_rounds``);
 4. when no CVFH hypothesis verifies, the part's stable rests on the table at
    evenly spaced yaws become the hypotheses and go through step 3
    (:mod:`~asmteach.plugins.detectors.cvfh.resting`; ``details["source"]``
