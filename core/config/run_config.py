@@ -126,12 +126,13 @@ class ExecutionSettings(StrictModel):
         "wrist camera",
     )
     in_hand: Literal["off", "measure", "reaim"] = Field(
-        "reaim",
+        "measure",
         description="the depth cameras' look at a held part before its insertion: 'measure' records it (the "
         "trace's 'measure in hand' event), 'reaim' also re-aims the insertion for it when it is clearly off "
-        "(asmteach.core.pipeline.execute.REALIGN_*), 'off' skips it. In the 50 structure trials of session 16 it "
-        "re-aimed twice: hex_peg 1 seed 9 (8.4 deg) assembled only with it, d_peg 0 seed 8 (4.5 deg; the 1 m Kinect "
-        "cannot see a D flat) only without it (docs/results/structures_corpus.md, Session 16)",
+        "(asmteach.core.pipeline.execute.REALIGN_*), 'off' skips it. Measured, re-aiming does not pay: in the "
+        "120-trial structures sweep of session 18 it re-aimed 5 insertions (6.6-10.7 deg; 1.3 mm RMSE from the "
+        "1 m Kinect against a grasp 0.1-0.7 deg off) and all 5 failed; with 'measure' all 5 assemble "
+        "(docs/results/structures_corpus.md, Session 19)",
     )
     fixture: Literal["auto", "never", "always"] = Field(
         "auto",
