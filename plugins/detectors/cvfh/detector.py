@@ -70,7 +70,7 @@ from asmteach.core.perception.open3d_tools import one_thread, to_o3d
 from asmteach.core.perception.registration import Verdict, model_cloud
 from asmteach.core.perception.segmentation import check_cloud, cluster_objects, merge_nearby, remove_table
 from asmteach.core.perception.viewpoint import StageClock, resolve_viewpoint
-from asmteach.core.symmetry import part_symmetries
+from asmteach.core.symmetry import part_symmetries, principal_frame
 from asmteach.core.symmetry.near import NearSymmetry
 from asmteach.plugins.detectors.cvfh.pinning import free_axes, pin_rivals
 from asmteach.plugins.detectors.cvfh.pose_search import (
@@ -131,10 +131,9 @@ class CvfhIcpDetector(Detector):
         if s.nudge_deg > 0:
             # Small turns about the principal axes: a pose ICP left a few degrees off (a smooth free-form part)
             # is pulled to the right one, or shows the view does not pin it down.
-            F = np.array(part.mesh.principal_inertia_vectors, dtype=float)
-            for axis in F:
+            for axis in principal_frame(part.mesh).T:
                 for a in (-s.nudge_deg, s.nudge_deg):
-                    R = geometry.from_rotvec(np.radians(a) * axis / np.linalg.norm(axis))[:3, :3]
+                    R = geometry.from_rotvec(np.radians(a) * axis)[:3, :3]
                     near.append(geometry.from_rotation(R, com - R @ com))
         samples = SampleIndex.of(model, self.seed)
         thin = float(part.mesh.bounding_box_oriented.primitive.extents.min()) < s.thin_height

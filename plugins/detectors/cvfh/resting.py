@@ -41,7 +41,7 @@ from asmteach.core.models import TablePlane
 from asmteach.core.perception.registration import ModelCloud
 from asmteach.core.perception.surface_check import ray_depths
 from asmteach.core.rests.placements import plan_placements, resting_poses
-from asmteach.core.symmetry import part_symmetries
+from asmteach.core.symmetry import part_symmetries, principal_frame
 
 import open3d as o3d  # isort: skip
 
@@ -111,9 +111,7 @@ def near_twins(
     """
     com = np.asarray(com, float)
     own = [S[:3, :3] for S in (part_symmetries(mesh, com) if own is None else own)]
-    F = np.array(mesh.principal_inertia_vectors, dtype=float).T  # np.array: trimesh's cache is read-only
-    if np.linalg.det(F) < 0:
-        F[:, 2] *= -1.0
+    F = principal_frame(mesh)
     cands = [F @ C @ F.T for C in Rotation.create_group("O").as_matrix()]
     for k in range(3):
         cands += [
