@@ -17,6 +17,9 @@ Robot plugins build on it (the Nextage, ``urdf_arm``); it depends on the core on
 - :mod:`~asmteach.core.arm.sim`: the PyBullet world (robot, table, parts, trajectory execution);
 - :mod:`~asmteach.core.arm.sim_gripper`: :class:`GripperJoints` and gripping in that world;
 - :mod:`~asmteach.core.arm.sim_camera`: its RGB camera images and the wrist camera a mount describes;
+- :mod:`~asmteach.core.arm.insertion`: the guarded insertion (:func:`guarded_insert`), with its settings and
+  outcome in :mod:`~asmteach.core.arm.insertion_records`, its sideways search in
+  :mod:`~asmteach.core.arm.insertion_search` and its turns in :mod:`~asmteach.core.arm.compliance`;
 - :mod:`~asmteach.core.arm.plan_check`: the independent re-check of a plan (its rules and results);
 - :mod:`~asmteach.core.arm.plan_checker`: its replay in a PyBullet world (:func:`recheck_plan`);
 - :mod:`~asmteach.core.arm.link_spheres`: the re-check's bounding spheres and joint reach bounds;

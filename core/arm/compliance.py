@@ -9,7 +9,7 @@ admittance step per resistance: ``dtheta = K * tau`` (radians per newton-metre),
 gain halved each time the torque turns back (the part crossed the guide's line).
 
 Only what a wrist F/T sensor and the joint encoders give drives it: the contact force and its moment
-(:class:`~asmteach.core.arm.insertion.PartContact`'s ``force_world`` and ``torque_world``, moved to the
+(:class:`~asmteach.core.arm.insertion_records.PartContact`'s ``force_world`` and ``torque_world``, moved to the
 compliance centre) and the TCP pose from forward kinematics; the centre itself is a point of the part's model
 where the plan believes it held (:func:`leading_point`), as a tool's compliance centre is configured.
 Units: metres, newtons, newton-metres, radians (degrees where a name says so). Frames: world unless named.

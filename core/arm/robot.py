@@ -25,7 +25,7 @@ import trimesh
 
 from asmteach.core.arm.batch_ik import ik_many
 from asmteach.core.arm.collision import CollisionChecker
-from asmteach.core.arm.insertion import PartContact
+from asmteach.core.arm.insertion_records import PartContact
 from asmteach.core.arm.kinematics import Kinematics
 from asmteach.core.arm.plan_check import CheckedArm, PlanCheck
 from asmteach.core.arm.plan_checker import recheck_plan
@@ -318,7 +318,7 @@ class ArmRobot(Robot, World):
     def part_contact(self, part: str, other: str) -> PartContact:
         """The contact between two parts now (:meth:`~asmteach.core.arm.sim.PyBulletWorld.part_contact`: the
         normal forces' total, point, push and moment); what :func:`~asmteach.core.arm.insertion.guarded_insert`
-        reads (:class:`~asmteach.core.arm.insertion.ContactSensing`)."""
+        reads (:class:`~asmteach.core.arm.insertion_records.ContactSensing`)."""
         return self.sim.part_contact(part, other)
 
     def camera_pose(self, view: int = 0) -> np.ndarray:

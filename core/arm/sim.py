@@ -29,7 +29,7 @@ import pybullet
 from pybullet_utils import bullet_client
 
 from asmteach.core import geometry
-from asmteach.core.arm.insertion import PartContact
+from asmteach.core.arm.insertion_records import PartContact
 from asmteach.core.convex_pieces import decompose
 from asmteach.core.errors import UserError
 from asmteach.core.interfaces import PartModel

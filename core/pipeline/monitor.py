@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from asmteach.core import geometry
-from asmteach.core.arm.insertion import InsertionOutcome
+from asmteach.core.arm.insertion_records import InsertionOutcome
 from asmteach.core.interfaces import Robot
 from asmteach.core.models import Plan
 
@@ -54,7 +54,7 @@ class ExecutionTrace:
     that moved a part no hand held (``pushed_mm``, ``tilted_deg``,
     ``toppled``, ``by`` the motion, its kind, ``t_s`` when the motion started).
     One event per guarded insertion (``insertion``: its
-    :meth:`~asmteach.core.arm.insertion.InsertionOutcome.as_dict`, ``t_s``,
+    :meth:`~asmteach.core.arm.insertion_records.InsertionOutcome.as_dict`, ``t_s``,
     and the poses the measure stage splits the insertion error with).
     """
 

@@ -2,7 +2,7 @@
 
 B's insertion pushes A along the insertion direction: with B's seat friction while B slides in freely, and
 with up to the guarded insertion's force limit when B meets resistance (the rim of a hole, a tight slot:
-:class:`~asmteach.core.arm.insertion.InsertionSettings.force_limit_n`, the most it pushes before it backs
+:class:`~asmteach.core.arm.insertion_records.InsertionSettings.force_limit_n`, the most it pushes before it backs
 off). Straight down, that force presses A onto the table; sideways, it drags A across it (a T-slider pushed
 along its slot took the block 9.4 mm with it) or tips it over an edge of its footprint. Quasi-static rigid
 body, Coulomb friction:

@@ -38,7 +38,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import trimesh
 
-from asmteach.core.arm.insertion import InsertionSettings
+from asmteach.core.arm.insertion_records import InsertionSettings
 from asmteach.core.errors import UserError
 from asmteach.core.geometry import compose, from_rotation, rot_z, transform_points
 from asmteach.core.interfaces import PartModel

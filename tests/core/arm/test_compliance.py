@@ -27,7 +27,8 @@ from asmteach.core.arm.compliance import (
     torque_about,
     turn_about,
 )
-from asmteach.core.arm.insertion import InsertionSettings, PartContact, guarded_insert
+from asmteach.core.arm.insertion import guarded_insert
+from asmteach.core.arm.insertion_records import InsertionSettings, PartContact
 from asmteach.core.arm.sim import PyBulletWorld, pb_to_pose, pose_to_pb
 from asmteach.core.interfaces import IKResult, PartModel
 from asmteach.core.models import PartSpec, Trajectory

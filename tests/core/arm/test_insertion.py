@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from asmteach.core.arm.insertion import InsertionSettings, PartContact, guarded_insert, realigned_line_end
+from asmteach.core.arm.insertion import guarded_insert, realigned_line_end
+from asmteach.core.arm.insertion_records import InsertionSettings, PartContact
 from asmteach.core.interfaces import IKResult
 from asmteach.core.models import Trajectory
 

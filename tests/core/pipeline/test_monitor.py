@@ -75,7 +75,7 @@ def test_the_plan_names_its_parts_in_order() -> None:
 
 def test_an_insertion_that_stops_short_fails_the_execute_stage_as_a_jam(monkeypatch: pytest.MonkeyPatch) -> None:
     """The plan goes on from where the insertion should have ended: the stage stops with the jam's evidence."""
-    from asmteach.core.arm.insertion import InsertionOutcome
+    from asmteach.core.arm.insertion_records import InsertionOutcome
     from asmteach.core.failures import FailureCause
     from asmteach.core.models import RunReport
     from asmteach.core.pipeline import execute
@@ -105,7 +105,7 @@ def test_an_insertion_that_stops_short_fails_the_execute_stage_as_a_jam(monkeypa
 @pytest.mark.parametrize("mode", ["off", "measure", "reaim"])
 def test_the_look_in_the_hand_reaims_only_when_asked(monkeypatch: pytest.MonkeyPatch, mode: str) -> None:
     """``execution.in_hand``: 'off' does not look, 'measure' looks and runs the planned line, 'reaim' re-aims it."""
-    from asmteach.core.arm.insertion import InsertionOutcome
+    from asmteach.core.arm.insertion_records import InsertionOutcome
     from asmteach.core.models import RunReport
     from asmteach.core.pipeline import execute
 
