@@ -33,8 +33,14 @@ def kinect_file(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, np.ndar
     grid[frame.pixels[:, 0], frame.pixels[:, 1]] = frame.points_cam
     labels = np.zeros((h, w), np.uint32)
     labels[frame.pixels[:, 0], frame.pixels[:, 1]] = frame.labels.astype(np.uint32)
-    path = clouds.write_pcd(folder / "kinect.pcd", grid.reshape(-1, 3), fields={"label": labels.ravel()}, width=w,
-                            height=h, data="binary_compressed")
+    path = clouds.write_pcd(
+        folder / "kinect.pcd",
+        grid.reshape(-1, 3),
+        fields={"label": labels.ravel()},
+        width=w,
+        height=h,
+        data="binary_compressed",
+    )
     world = clouds.write_pcd(folder / "world.pcd", frame.points_world, T_data_sensor=frame.T_world_cam)
     assert world.is_file()
     return path, T, frame.T_world_cam, folder

@@ -169,8 +169,10 @@ def test_cli_viewpoint_from_the_cloud_file_else_exit_2(
         return main(["detect", str(STRUCTURE), "--cloud", str(cloud), "--out", str(out), "--no-correct"])
 
     # A PLY from asmteach's renderer carries the camera centre ('comment viewpoint'); a PCD its VIEWPOINT header.
-    for cloud in (scene.frame.write_ply(tmp_path / "scene.ply"),
-                  _pcd_with_viewpoint(tmp_path / "scene.pcd", scene.cloud, ROBOT_EYE)):
+    for cloud in (
+        scene.frame.write_ply(tmp_path / "scene.ply"),
+        _pcd_with_viewpoint(tmp_path / "scene.pcd", scene.cloud, ROBOT_EYE),
+    ):
         assert detect(cloud) == 0, capsys.readouterr()
         doc = json.loads(out.read_text())
         assert np.allclose(doc["details"]["viewpoint"], ROBOT_EYE, atol=1e-6), cloud.name
