@@ -5,7 +5,8 @@ would tell a detection's rivals apart (:func:`~asmteach.core.perception.view_cho
 as listed, the part's symmetries, the fixed views' height map above the table as occluder), moves a wrist camera
 (``KinectSettings.wrist_stereo()``, one frame) to the best one the arm reaches, and judges the rivals on every
 view so far (:func:`~asmteach.core.detect_correct.resolve_by_views`); the first look that settles it ends the
-search, else the next-ranked viewpoint is looked from. Here the same is done with no robot: the camera goes to the
+search, else the viewpoints are ranked again for the two poses the views now leave (the best and its closest
+rival) and the best of those is looked from. Here the same is done with no robot: the camera goes to the
 ranked viewpoints themselves (no IK, no collision, no path), so the figures are an upper bound of what the arm's
 looks give. :data:`REACH_REGION` restricts the candidates to a cone from above that a Nextage wrist reaches.
 
@@ -28,7 +29,7 @@ from asmteach.core.interfaces import PartModel
 from asmteach.core.models import Detection, TablePlane
 from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
 from asmteach.core.perception.second_view import DepthView
-from asmteach.core.perception.view_choice import ViewChoiceSettings, rank_viewpoints
+from asmteach.core.perception.view_choice import ViewChoiceSettings, Viewpoint, rank_viewpoints
 from asmteach.core.pipeline.active_look import seen_heightmap
 from asmteach.plugins.detectors.cvfh.scenes import render_table_scene
 
@@ -81,31 +82,46 @@ def free_looks(
     skip = [(T[:3, :3] @ centre + T[:3, 3], radius + 0.01) for T in poses]
     seen = seen_heightmap(views, table, skip)
     occluders = [] if seen is None else [(seen, np.eye(4))]
-    ranked = rank_viewpoints(
-        part.mesh, poses, sensor, table, symmetries=symmetries, occluders=occluders, frames=1, settings=settings
-    )
+
+    def rank(rivals: list[np.ndarray]) -> list[Viewpoint]:
+        return rank_viewpoints(
+            part.mesh, rivals, sensor, table, symmetries=symmetries, occluders=occluders, frames=1, settings=settings
+        )
+
+    ranked, rank_i = rank(poses), 0
     out = CloseLooks(det, [{"ranked_viewpoints": len(ranked), "rank_seconds": round(time.perf_counter() - t0, 3)}])
     mesh, T_true = truth
-    for n, vp in enumerate(ranked[:looks]):
+    looked: list[np.ndarray] = []  # camera centres looked from
+    while len(out.views) < looks and rank_i < len(ranked):
+        vp, rank_i = ranked[rank_i], rank_i + 1
+        eye = vp.T_world_cam[:3, 3]
+        if any(np.linalg.norm(eye - c) < 0.01 for c in looked):
+            continue
         t1 = time.perf_counter()
-        camera = DepthCamera(sensor, seed=seed + 7919 * (n + 1))
+        camera = DepthCamera(sensor, seed=seed + 7919 * (len(out.views) + 1))
         shot = render_table_scene(camera, mesh, T_true, table=table_settings, T_world_cam=vp.T_world_cam)
-        view = DepthView(shot.cloud, vp.T_world_cam[:3, 3].copy(), sensor)
+        view = DepthView(shot.cloud, eye.copy(), sensor)
         out.views.append(view)
+        looked.append(eye.copy())
         judged = resolve_by_views(det, part, [*views, *out.views], table, symmetries)
         verdict = judged.details.get("resolved_by_view") or judged.details.get("second_view") or {}
-        out.looks.append(
-            {
-                **vp.as_details(),
-                "points": len(view.cloud),
-                "compute_seconds": round(time.perf_counter() - t1, 3),
-                "winner": verdict.get("winner"),
-                "closest_rival_gain": verdict.get("closest_rival_gain"),
-                "closest_rival_z": verdict.get("closest_rival_z"),
-            }
-        )
+        rec = {
+            **vp.as_details(),
+            "points": len(view.cloud),
+            "winner": verdict.get("winner"),
+            "closest_rival_gain": verdict.get("closest_rival_gain"),
+            "closest_rival_z": verdict.get("closest_rival_z"),
+        }
+        out.looks.append(rec)
         out.detection = judged
         if judged.found:
-            judged.details["resolved_by_look"] = out.looks[-1]
+            judged.details["resolved_by_look"] = rec
+            rec["compute_seconds"] = round(time.perf_counter() - t1, 3)
             break
+        pair = [verdict.get(k) for k in ("best_T_world_part", "closest_rival_T_world_part")]
+        if len(out.views) < looks and all(T is not None for T in pair):
+            # ranked again for the two poses the views now leave, as the pipeline's look_closer does: the first
+            # ranking was for the fixed views' rivals, and a look that rules those out leaves others
+            ranked, rank_i = rank([np.asarray(T, float) for T in pair]), 0
+        rec["compute_seconds"] = round(time.perf_counter() - t1, 3)
     return out

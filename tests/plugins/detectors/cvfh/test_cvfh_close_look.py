@@ -65,3 +65,41 @@ def test_no_look_for_a_found_detection_or_a_single_pose(case) -> None:
     for det in (found, lone):
         out = free_looks(det, part, (part.mesh, T_true), [first], TablePlane(), looks=2, seed=0)
         assert out.detection is det and not out.looks and not out.views
+
+
+def test_a_look_that_settles_nothing_ranks_again_for_the_pair_it_leaves(case, monkeypatch) -> None:
+    """As the pipeline's look_closer: the second look is ranked for the views' best pose and its closest rival,
+    not taken from the first ranking (which was for the fixed view's rivals)."""
+    import asmteach.plugins.detectors.cvfh.close_look as close_look
+
+    part, T_true, rival, first = case
+    pair = [T_true.copy(), rival.copy()]
+    pair[1][:3, 3] += 0.003  # a rival the fixed view did not list
+    ranked_for: list[list[np.ndarray]] = []
+    real_rank = close_look.rank_viewpoints
+
+    def rank(mesh, poses, *args, **kwargs):
+        ranked_for.append([np.asarray(T, float) for T in poses])
+        return real_rank(mesh, poses, *args, **kwargs)
+
+    def undecided(det, part, views, table, symmetries):
+        verdict = {"best_T_world_part": pair[0].tolist(), "closest_rival_T_world_part": pair[1].tolist()}
+        return Detection(part=det.part, found=False, reason="still ambiguous", details={"second_view": verdict})
+
+    monkeypatch.setattr(close_look, "rank_viewpoints", rank)
+    monkeypatch.setattr(close_look, "resolve_by_views", undecided)
+    out = free_looks(
+        _ambiguous([rival, T_true]),
+        part,
+        (part.mesh, T_true),
+        [first],
+        TablePlane(),
+        looks=2,
+        seed=3,
+        settings=REACH_REGION,
+    )
+    assert len(out.views) == 2 and not out.detection.found
+    assert len(ranked_for) == 2  # once for the listed rivals, once for the pair the first look left
+    assert np.allclose(ranked_for[0][0], rival) and np.allclose(ranked_for[1][1], pair[1])
+    eyes = [v.viewpoint for v in out.views]
+    assert np.linalg.norm(eyes[0] - eyes[1]) >= 0.01  # never the same viewpoint twice
