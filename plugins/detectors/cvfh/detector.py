@@ -79,11 +79,18 @@ from asmteach.plugins.detectors.cvfh.pose_search import (
     hull_twin_pass,
     near_twin_pass,
     poses_apart,
+    rest_pass,
     verify_rounds,
     view_hypotheses,
 )
 from asmteach.plugins.detectors.cvfh.prescore import SampleIndex, near_shares, support_gap
-from asmteach.plugins.detectors.cvfh.resting import hull_twins, near_twins, resting_hypotheses, stable_rests
+from asmteach.plugins.detectors.cvfh.resting import (
+    every_rest,
+    hull_twins,
+    near_twins,
+    resting_hypotheses,
+    stable_rests,
+)
 from asmteach.plugins.detectors.cvfh.settings import CvfhSettings
 from asmteach.plugins.detectors.cvfh.thin import raised_mask
 from asmteach.plugins.detectors.cvfh.views import describe_cloud, load_or_build
@@ -153,6 +160,7 @@ class CvfhIcpDetector(Detector):
             thin,
             free,
             same,
+            every_rest(part.mesh, com) if s.rest_rivals_deg > 0 else np.zeros((0, 4, 4)),
         )
         self._prepared[key] = prep
         return prep
@@ -330,10 +338,18 @@ class CvfhIcpDetector(Detector):
                 info["ambiguous"] = [first, *ambiguous]
                 info["ambiguous_kind"] = "hull_twin"
                 return _Outcome(None, replace(best, accepted=False, why=why), info, job.icp_passes)
+        at_rest = False
         if best is not None and prep.near:
-            best, rival = near_twin_pass(best, job, prep, clock, s)
-            if rival is not None:
+            best, rivals = near_twin_pass(best, job, prep, clock, s)
+            poses = [best.T_world_part, *(v.T_world_part for v in rivals)]
+            settled = rest_pass(poses, job, prep, clock, s) if rivals else None
+            if settled is not None:
+                # The view cannot tell them apart, but the table can: one of them rests on it.
+                info["at_rest"] = {"rivals": "near_twin", "poses": 1 + len(rivals)}
+                best, at_rest = settled, True
+            elif rivals:
                 # The view cannot tell two distinct poses apart: reporting either would be a guess.
+                rival = rivals[0]
                 mm, deg = poses_apart(best.T_world_part, rival.T_world_part, prep.own)
                 why = (
                     f"ambiguous: a pose {mm:.0f} mm and {deg:.0f} deg away explains the view as well (score "
@@ -346,7 +362,13 @@ class CvfhIcpDetector(Detector):
                 info["ambiguous_kind"] = "near_twin"
                 return _Outcome(None, replace(best, accepted=False, why=why), info, job.icp_passes)
         if best is not None and s.pin_sigmas > 0:
-            sigma, rivals = pin_rivals(best.T_world_part, job, prep, s)
+            sigma, rivals = pin_rivals(best.T_world_part, job, prep, s, at_rest=at_rest)
+            settled = None if at_rest or not rivals else rest_pass([best.T_world_part, *rivals], job, prep, clock, s)
+            if settled is not None:
+                # The view leaves a tilt free, and the table pins it: the pose turned both ways rests as one.
+                info["at_rest"] = {"rivals": "unpinned", "poses": 1 + len(rivals)}
+                best = settled
+                sigma, rivals = pin_rivals(best.T_world_part, job, prep, s, at_rest=True)
             info["rotation_sigma_deg"] = round(sigma, 3)
             if rivals:
                 # The seen points leave the pose free to turn by the tolerance: reporting it would be a guess.

@@ -110,10 +110,14 @@ def _orthonormal(rows: np.ndarray) -> np.ndarray:
     return vt[sv > 1e-6 * sv.max()]
 
 
-def pin_rivals(T: np.ndarray, job: ClusterJob, prep: Prepared, s: CvfhSettings) -> tuple[float, list[np.ndarray]]:
+def pin_rivals(
+    T: np.ndarray, job: ClusterJob, prep: Prepared, s: CvfhSettings, at_rest: bool = False
+) -> tuple[float, list[np.ndarray]]:
     """``(sigma_deg, rivals)``: the pose's rotation uncertainty in its weakest direction, and, when ``pin_sigmas``
     times it exceeds ``distinct_deg``, ``T`` turned that many sigmas both ways about that direction (through
-    the seen centroid; world frame, metres); no rivals when the view pins the pose down.
+    the seen centroid; world frame, metres); no rivals when the view pins the pose down. ``at_rest``: ``T`` rests
+    on a stable rest on the table (:func:`~asmteach.plugins.detectors.cvfh.pose_search.rest_pass`), which pins
+    its tilts; only the turn about the table normal is the view's to pin.
 
     A weakest direction about which every turn, all round, keeps the part's surface in place (``prep.same``:
     an axis of revolution the listed symmetries miss) is no uncertainty of the answer: it is left out, as
@@ -122,6 +126,10 @@ def pin_rivals(T: np.ndarray, job: ClusterJob, prep: Prepared, s: CvfhSettings) 
     the truth is, and the corpus torus, found 11.9 deg about its axis from the truth, is 0.52 mm off there.
     """
     free = np.zeros((0, 3))
+    if at_rest:
+        n = np.asarray(job.table.normal, float)
+        tilts = np.linalg.svd(np.eye(3) - np.outer(n, n) / float(n @ n))[0][:, :2].T  # world axes across the normal
+        free = tilts @ T[:3, :3]  # part frame
     for _ in range(3):
         sigma, axis, centre = weakest_turn(T, job, prep, s.refine.inlier_distance, free)
         if s.pin_sigmas * sigma <= s.distinct_deg:

@@ -8,8 +8,9 @@ in order:
 * :func:`verify_rounds`: coarse ICP, fine ICP and verification of the best pre-scored ones, in rounds of
   ``icp_candidates`` until one verifies;
 * :func:`hull_twin_pass`: the verified pose turned by each hull twin, the ray evidence choosing;
-* :func:`near_twin_pass`: the pose turned by each near twin and nudge, and the distinct rival that
-  scores as well, if any (the view cannot tell them apart);
+* :func:`near_twin_pass`: the pose turned by each near twin and nudge, and the distinct rivals that
+  score as well, if any (the view cannot tell them apart);
+* :func:`rest_pass`: what the table says of poses the view cannot tell apart (the part lies at rest on it);
 
 and then :mod:`~asmteach.plugins.detectors.cvfh.pinning` judges how well the seen points pin the winner down.
 """
@@ -31,7 +32,7 @@ from asmteach.core.perception.registration import (
 from asmteach.core.perception.viewpoint import StageClock
 from asmteach.core.symmetry.near import NearSymmetry
 from asmteach.plugins.detectors.cvfh.prescore import SampleIndex, near_shares, support_gap
-from asmteach.plugins.detectors.cvfh.resting import disagreement, snap_to_rest
+from asmteach.plugins.detectors.cvfh.resting import disagreement, rests_near, slide_on_table, snap_to_rest
 from asmteach.plugins.detectors.cvfh.settings import CvfhSettings
 from asmteach.plugins.detectors.cvfh.views import CloudDescription, ViewDatabase
 
@@ -42,6 +43,7 @@ __all__ = [
     "is_distinct",
     "near_twin_pass",
     "poses_apart",
+    "rest_pass",
     "verify_at_rest",
     "verify_rounds",
     "view_hypotheses",
@@ -73,6 +75,9 @@ class Prepared:
     """(m, 3) part-frame axes of revolution (see :func:`~asmteach.plugins.detectors.cvfh.pinning.free_axes`)."""
     same: NearSymmetry | None = None
     """Tells two poses that put the surface in the same place (``same_surface``; ``None``: listed symmetries only)."""
+    every_rest: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))
+    """(k, 4, 4) every pose the part can rest in on z = 0, however unlikely (see :func:`every_rest`): the table
+    decides between poses only when none is missing."""
 
 
 @dataclass
@@ -243,12 +248,13 @@ def hull_twin_pass(
 
 def near_twin_pass(
     best: Verdict, job: ClusterJob, prep: Prepared, clock: StageClock, s: CvfhSettings
-) -> tuple[Verdict, Verdict | None]:
-    """Try ``best`` turned by each near twin: ``(the best-scoring verified pose, a distinct rival or None)``.
+) -> tuple[Verdict, list[Verdict]]:
+    """Try ``best`` turned by each near twin: ``(the best-scoring verified pose, the distinct rivals)``.
 
     A rival is a verified pose, distinct from the winner (beyond the part's
     own symmetries), scoring within ``ambiguity_margin`` of it, that the
-    disagreement evidence (``near_fit``, ``near_off``) does not rule out.
+    disagreement evidence (``near_fit``, ``near_off``) does not rule out;
+    the list is empty when the view tells every turned pose from the winner.
     """
     found = [best]
     # Hull twins the hull pass verified were judged there (found with details["ambiguous"] when the view
@@ -275,16 +281,65 @@ def near_twin_pass(
         if v.accepted:
             found.append(v)
     found.sort(key=lambda v: -v.score)
-    winner = found[0]
-    for v in found[1:]:
+    return found[0], _rivals(found[0], found[1:], job, prep, s)
+
+
+def _rivals(winner: Verdict, others: list[Verdict], job: ClusterJob, prep: Prepared, s: CvfhSettings) -> list[Verdict]:
+    """The verified ``others`` the view cannot tell from ``winner``: distinct from it, scoring within
+    ``ambiguity_margin`` of it and not ruled out by the disagreement evidence (``near_fit``, ``near_off``)."""
+    out = []
+    for v in others:
         if winner.score - v.score > s.ambiguity_margin or not is_distinct(
             v.T_world_part, [winner.T_world_part], prep.own, s, same=prep.same
         ):
             continue
         ev = disagreement(winner.T_world_part, v.T_world_part, job.cluster, job.eye, prep.model, s.near_fit, s.near_off)
         if ev.verdict(s.twin_min_points, s.twin_ratio) != "a":
-            return winner, v
-    return winner, None
+            out.append(v)
+    return out
+
+
+def rest_pass(
+    poses: list[np.ndarray], job: ClusterJob, prep: Prepared, clock: StageClock, s: CvfhSettings
+) -> Verdict | None:
+    """The one pose at rest on the table among ``poses`` the view cannot tell apart, if the table decides.
+
+    The paper's premise: a part lies at rest on the table (the corrector snaps every detection onto a stable
+    placement). A turn the camera cannot see is often one the table forbids: a D peg lying on its flat, seen from
+    above, is a cylinder to the camera, and its roll about its axis (the flat's edges are under the round side,
+    out of any view from above) sinks one edge into the table and lifts the other. Each of ``poses`` is put at
+    every rest within ``rest_rivals_deg`` of it, its yaw and its place on the table kept
+    (:func:`~asmteach.plugins.detectors.cvfh.resting.rests_near`), moved on the table to fit the view
+    (:func:`~asmteach.plugins.detectors.cvfh.resting.slide_on_table`) and verified. The rests are
+    :attr:`Prepared.every_rest`, every hull facet the centre of mass lies over, however unlikely: with only the
+    likely rests, a keyed peg lying on a facet of its round side, key sideways, was put on the likeliest rest near
+    it, key down, which the view could not refute. The best-scoring verified resting pose is the answer when no
+    other distinct one is a rival (:func:`_rivals`, as for near twins). ``None`` when none verifies or two distinct
+    resting poses explain the view as well. World frame, metres.
+    """
+    if s.rest_rivals_deg <= 0.0 or not len(prep.every_rest):
+        return None
+    resting: list[Verdict] = []
+    tried: list[np.ndarray] = []
+    for T in poses:
+        for Tr, _ in rests_near(T, prep.every_rest, prep.model, job.table, s.rest_rivals_deg):
+            if not is_distinct(Tr, tried, prep.own, s, same=prep.same):
+                continue
+            tried.append(Tr)
+            Tr = slide_on_table(Tr, job.icp_in, prep.model, job.table, s.refine.inlier_distance)
+            v = verify(Tr, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+            clock.lap("verify")
+            if not v.accepted:
+                continue
+            if any(_rivals(u, [v], job, prep, s) and _rivals(v, [u], job, prep, s) for u in resting):
+                # two resting poses the view cannot tell apart either way: the table does not decide (the rest are
+                # not verified: a keyed peg on its round side has a rest every 5.6 deg, dozens near the rivals)
+                return None
+            resting.append(v)
+    if not resting:
+        return None
+    resting.sort(key=lambda v: -v.score)
+    return None if _rivals(resting[0], resting[1:], job, prep, s) else resting[0]
 
 
 def poses_apart(A: np.ndarray, B: np.ndarray, own: list[np.ndarray]) -> tuple[float, float]:

@@ -40,6 +40,7 @@ from asmteach.core import geometry
 from asmteach.core.models import TablePlane
 from asmteach.core.perception.registration import ModelCloud
 from asmteach.core.perception.surface_check import ray_depths
+from asmteach.core.rests.drops import drop_rests
 from asmteach.core.rests.placements import plan_placements, resting_poses
 from asmteach.core.symmetry import part_symmetries, principal_frame
 
@@ -48,9 +49,12 @@ import open3d as o3d  # isort: skip
 __all__ = [
     "Disagreement",
     "disagreement",
+    "every_rest",
     "hull_twins",
     "near_twins",
     "resting_hypotheses",
+    "rests_near",
+    "slide_on_table",
     "snap_to_rest",
     "stable_rests",
     "table_frame",
@@ -65,6 +69,13 @@ def stable_rests(mesh: trimesh.Trimesh, com: np.ndarray, max_poses: int) -> np.n
     """
     placements = plan_placements(mesh, np.asarray(com, float), symmetry=False).placements
     return resting_poses(placements, np.asarray(mesh.vertices))[0][:max_poses]
+
+
+def every_rest(mesh: trimesh.Trimesh, com: np.ndarray) -> np.ndarray:
+    """``(k, 4, 4)`` part poses resting on the plane z = 0, one per convex-hull facet the centre of mass ``com``
+    (part frame, metres) lies over, however small its margin or its chance (trimesh's stable poses, no threshold):
+    every way the part can rest, where :func:`stable_rests` keeps the placements a drop is likely to end in."""
+    return drop_rests(mesh, np.asarray(com, float))[0]
 
 
 def hull_twins(mesh: trimesh.Trimesh, com: np.ndarray, own: list[np.ndarray] | None = None) -> list[np.ndarray]:
@@ -203,19 +214,75 @@ def snap_to_rest(
     normal, the one whose rotation is nearest the pose's; the model's bounding-box centre stays where the
     pose puts it (in the table plane) and its lowest point is put on the table.
     """
+    return rests_near(T_world_part, rests, model, table)[0]
+
+
+def rests_near(
+    T_world_part: np.ndarray, rests: np.ndarray, model: ModelCloud, table: TablePlane, limit_deg: float = np.inf
+) -> list[tuple[np.ndarray, float]]:
+    """``(T_world_part at a stable rest, the turn to it in degrees)`` for every rest within ``limit_deg``,
+    nearest first.
+
+    Each rest is turned about the table normal to the yaw nearest the pose's rotation; the model's
+    bounding-box centre stays where the pose puts it (in the table plane) and its lowest point is put on the
+    table (``rests``: :func:`stable_rests`, on z = 0 of the table frame).
+    """
     T_wt = table_frame(table)
     T_tp = geometry.invert(T_wt) @ np.asarray(T_world_part, float)
-    best, best_deg = np.eye(3), np.inf
+    centre = T_tp[:3, :3] @ model.center + T_tp[:3, 3]
+    out = []
     for rest in rests:
         M = T_tp[:3, :3] @ rest[:3, :3].T  # Rz(yaw) for a pose exactly at this rest
-        R = geometry.rot_z(float(np.arctan2(M[1, 0], M[0, 0])))[:3, :3] @ rest[:3, :3]
+        # the yaw whose Rz is nearest M (the largest trace of Rz^T M): the turn to the rest is the least
+        R = geometry.rot_z(float(np.arctan2(M[1, 0] - M[0, 1], M[0, 0] + M[1, 1])))[:3, :3] @ rest[:3, :3]
         deg = float(np.degrees(geometry.rotation_angle(R.T @ T_tp[:3, :3])))
-        if deg < best_deg:
-            best, best_deg = R, deg
-    centre = T_tp[:3, :3] @ model.center + T_tp[:3, 3]
-    t = centre - best @ model.center
-    t[2] -= float(np.min(model.hull_vertices @ best[2] + t[2]))
-    return T_wt @ geometry.from_rotation(best, t), best_deg
+        t = centre - R @ model.center
+        t[2] -= float(np.min(model.hull_vertices @ R[2] + t[2]))
+        out.append((T_wt @ geometry.from_rotation(R, t), deg))
+    out.sort(key=lambda c: c[1])
+    return [c for c in out if c[1] <= limit_deg]
+
+
+def slide_on_table(
+    T_world_part: np.ndarray,
+    points: np.ndarray,
+    model: ModelCloud,
+    table: TablePlane,
+    inlier: float,
+    iterations: int = 10,
+) -> np.ndarray:
+    """``T_world_part`` moved on the table only (along it and turned about its normal) to fit the seen ``points``.
+
+    A pose at a stable rest has its height and tilt from the table; the view gives the other three unknowns.
+    Point-to-plane Gauss-Newton on those three: each seen point (world, metres) within ``inlier`` metres of the
+    model pairs with its nearest model point and that point's normal. The rest's tilt and height are kept
+    exactly; ICP, free in six, would tilt the pose again where the view does not pin it.
+    """
+    import open3d as o3d
+
+    n = np.asarray(table.normal, float)
+    n = n / np.linalg.norm(n)
+    e1, e2 = np.linalg.svd(np.eye(3) - np.outer(n, n))[0][:, :2].T  # two directions along the table
+    T = np.asarray(T_world_part, float).copy()
+    pts = np.asarray(points, float)
+    for _ in range(iterations):
+        local = geometry.transform_points(geometry.invert(T), pts)
+        near = model.scene.compute_closest_points(o3d.core.Tensor(local.astype(np.float32)))
+        q_local = near["points"].numpy().astype(float)
+        ok = np.linalg.norm(q_local - local, axis=1) < inlier
+        if ok.sum() < 10:
+            break
+        q = geometry.transform_points(T, q_local[ok])
+        nw = near["primitive_normals"].numpy().astype(float)[ok] @ T[:3, :3].T
+        c = q.mean(axis=0)
+        r = np.einsum("ij,ij->i", nw, pts[ok] - q)  # the seen point's distance along the model's normal
+        J = np.column_stack([np.einsum("ij,ij->i", nw, np.cross(n, q - c)), nw @ e1, nw @ e2])
+        (turn, a, b), *_ = np.linalg.lstsq(J, r, rcond=None)
+        R = geometry.from_rotvec(turn * n)[:3, :3]
+        T = geometry.from_rotation(R, c - R @ c + a * e1 + b * e2) @ T
+        if abs(turn) < 1e-5 and np.hypot(a, b) < 1e-5:
+            break
+    return T
 
 
 @dataclass(frozen=True)

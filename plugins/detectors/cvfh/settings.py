@@ -63,6 +63,14 @@ class CvfhSettings(StrictModel):
         "a part seen only above segment.min_height leaves ICP free to tilt (a U bracket 15 mm tall, its legs "
         "half cut off: 7.7 deg off, rejected; at the rest 0.4 deg) (0: never)",
     )
+    rest_rivals_deg: float = Field(
+        45.0,
+        ge=0.0,
+        description="poses the view cannot tell apart (near twins, an unpinned turn) are each put at every stable "
+        "rest (resting_poses of them) within this many degrees and verified there: when the verified resting poses "
+        "are one pose, the table has told them apart (a D peg lying on its flat, rolled about its axis, sinks an "
+        "edge into the table) and it is found (0: never)",
+    )
     twin_fit: float = Field(0.004, gt=0.0, description="a pose explains a point within this along its ray, metres")
     twin_off: float = Field(0.010, gt=0.0, description="a pose clearly fails a point beyond this along its ray")
     twin_min_points: int = Field(10, ge=1, description="points of evidence needed to tell hull twins apart")

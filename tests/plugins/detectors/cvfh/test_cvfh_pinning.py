@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import trimesh
+from scipy.spatial.transform import Rotation
 
 from asmteach.core import geometry
 from asmteach.core.models import TablePlane
@@ -81,3 +82,20 @@ def test_an_unpinned_pose_lists_itself_turned_both_ways_unless_every_turn_keeps_
     box = trimesh.creation.box((0.06, 0.04, 0.03))
     T, job, prep = _job(box, _seen(box, [(0, 0, 1)]), NearSymmetry(box))
     assert len(pin_rivals(T, job, prep, s)[1]) == 2
+
+
+def test_at_rest_the_table_pins_the_tilts_and_the_view_only_the_turn_about_the_table_normal(d_peg_mesh) -> None:
+    """A D peg lying on its flat, seen from above: the round side it shows leaves the roll about its axis free (a
+    tilt), which the table pins when the pose rests on it; the turn about the table normal the long side pins."""
+    lying = d_peg_mesh.copy()
+    lying.apply_transform(geometry.from_rotvec([0.0, np.radians(90.0), 0.0]))  # the flat (+x) down, the axis along y
+    pts, faces = trimesh.sample.sample_surface_even(lying, 6000, seed=0)
+    seen = pts[np.asarray(lying.face_normals)[faces][:, 2] > 0.2]  # the round side, from above
+    s = CvfhSettings()
+    T, job, prep = _job(lying, seen, None)
+    sigma, rivals = pin_rivals(T, job, prep, s)
+    assert len(rivals) == 2
+    roll = Rotation.from_matrix(rivals[0][:3, :3] @ T[:3, :3].T).as_rotvec()
+    assert abs(roll @ [0.0, 1.0, 0.0]) > 0.95 * np.linalg.norm(roll)  # the rivals roll it about its axis
+    at_rest, none = pin_rivals(T, job, prep, s, at_rest=True)
+    assert none == [] and s.pin_sigmas * at_rest <= s.distinct_deg < s.pin_sigmas * sigma

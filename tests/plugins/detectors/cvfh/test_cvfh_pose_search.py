@@ -120,3 +120,85 @@ def test_a_tilted_pose_verification_rejects_is_accepted_snapped_onto_its_rest(tm
     mm, deg = poses_apart(v.T_world_part, T, prep.own)
     assert mm < 1.0 and deg < 1.0
     assert not verify_at_rest(T_off, job, prep, CvfhSettings(rest_snap_deg=5.0)).accepted
+
+
+def test_rests_near_puts_a_pose_at_each_stable_rest_within_the_limit_nearest_first() -> None:
+    from asmteach.core.models import TablePlane
+    from asmteach.core.perception.registration import model_cloud
+    from asmteach.plugins.detectors.cvfh.resting import rests_near, snap_to_rest, stable_rests
+
+    box = trimesh.creation.box(extents=[0.06, 0.04, 0.02])
+    model = model_cloud(box, 500)
+    rests = stable_rests(box, np.zeros(3), 8)
+    table = TablePlane(height=0.1)
+    # lying on its 60 x 40 face, yawed 30 deg, then tilted 12 deg about world x and lifted 5 mm
+    T = geometry.from_rotation(np.eye(3), (0.4, 0.1, 0.11)) @ geometry.rot_z(np.radians(30.0))
+    T_off = geometry.from_rotvec(np.radians(12.0) * np.array([1.0, 0.0, 0.0])) @ T
+    T_off[:3, 3] = T[:3, 3] + [0.0, 0.0, 0.005]
+    near = rests_near(T_off, rests, model, table, 45.0)
+    assert len(near) == 1  # the next rests (on a 60 x 20 or 40 x 20 face) are 78 deg and more away
+    ((T_rest, deg),) = near
+    assert deg == pytest.approx(12.0, abs=0.1)
+    mm, turn = poses_apart(T_rest, T, [np.eye(4)])
+    assert mm < 0.5 and turn < 0.1  # back on its face, on the table, yaw and place kept
+    assert len(rests_near(T_off, rests, model, table)) == len(rests)  # no limit: every rest, nearest first
+    assert [d for _, d in rests_near(T_off, rests, model, table)] == sorted(
+        d for _, d in rests_near(T_off, rests, model, table)
+    )
+    assert snap_to_rest(T_off, rests, model, table)[0] == pytest.approx(T_rest)
+
+
+def test_a_d_peg_lying_on_its_flat_is_found_by_the_table_where_the_view_sees_a_cylinder(
+    d_peg_part, tmp_path: Path
+) -> None:
+    """A D peg lying on its flat, seen from above, shows a half cylinder: its roll about its axis is out of sight
+    (the flat's edges lie under the round side) and the view leaves rival rolls. At rest on the table they are one
+    pose (rolled, one edge sinks into the table): the detector reports it found, at its rest. Without the table's
+    say (``rest_rivals_deg`` 0) the same view is ambiguous."""
+    from asmteach.core.config import TableSettings
+    from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings
+    from asmteach.core.symmetry import part_symmetries
+    from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
+    from asmteach.plugins.detectors.cvfh.scenes import default_camera_pose, place_on_table, render_table_scene
+
+    on_flat = geometry.from_rotvec([0.0, np.radians(90.0), 0.0])  # the flat's normal (+x) down
+    T = place_on_table(d_peg_part.mesh, on_flat, 0.7, (0.45, 0.05))
+    T_cam = default_camera_pose(TableSettings())
+    own = part_symmetries(d_peg_part.mesh, d_peg_part.center_of_mass)  # a half-turn about the flat's normal
+    out = {}
+    for limit in (45.0, 0.0):
+        detector = CvfhIcpDetector({"views": {"cache_dir": str(tmp_path)}, "rest_rivals_deg": limit}, seed=0)
+        hits = []
+        for seed in (1, 2):
+            scene = render_table_scene(DepthCamera(KinectSettings(), seed=seed), d_peg_part.mesh, T, T_world_cam=T_cam)
+            hits.append(detector.detect(scene.cloud, d_peg_part, viewpoint=T_cam[:3, 3]))
+        out[limit] = hits
+    for det in out[45.0]:
+        assert det.found, det.reason
+        assert "at_rest" in det.details
+        mm, deg = poses_apart(np.asarray(det.rough), T, own)
+        assert mm < 1.5 and deg < 1.0
+    assert any(not det.found and det.details.get("ambiguous") for det in out[0.0])
+
+
+def test_slide_on_table_fits_the_view_along_the_table_and_keeps_the_rest_height_and_tilt() -> None:
+    from asmteach.core.models import TablePlane
+    from asmteach.core.perception.registration import model_cloud
+    from asmteach.plugins.detectors.cvfh.resting import slide_on_table
+
+    box = trimesh.creation.box(extents=[0.05, 0.03, 0.02])
+    model = model_cloud(box, 2000)
+    table = TablePlane(height=0.1)
+    T = geometry.from_rotation(np.eye(3), (0.45, 0.02, 0.11)) @ geometry.rot_z(np.radians(25.0))
+    pts, faces = trimesh.sample.sample_surface_even(box, 3000, seed=1)
+    up = np.asarray(box.face_normals)[faces] @ T[:3, :3].T @ np.array([-0.6, 0.0, 0.8]) > 0.1  # what the eye sees
+    seen = geometry.transform_points(T, pts[up])
+    # 3 mm along the table and 4 deg about its normal off
+    turn = geometry.rot_z(np.radians(4.0))  # about the box's centre
+    turn[:3, 3] = T[:3, 3] - turn[:3, :3] @ T[:3, 3] + (0.002, -0.002, 0.0)
+    off = turn @ T
+    got = slide_on_table(off, seen, model, table, inlier=0.006)
+    mm, deg = poses_apart(got, T, [np.eye(4)])
+    assert mm < 0.2 and deg < 0.2
+    assert got[2, 3] == pytest.approx(off[2, 3], abs=1e-9)  # the height the rest gave
+    assert got[:3, 2] == pytest.approx(off[:3, 2], abs=1e-9)  # and its tilt
