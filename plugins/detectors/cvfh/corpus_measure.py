@@ -2,8 +2,8 @@
 
 Each scene puts the part's true mesh in one of its stable rests (trimesh's,
 drawn by probability) at a seeded yaw and position on the table, renders it
-with the scene Kinect (noise on) and runs the detector on the part as it was
-loaded (a user's CAD STL, repaired), the camera centre as the viewpoint.
+with the scene Kinect (noise on; ``execution.depth_frames`` frames stacked, as a run senses) and runs
+the detector on the part as it was loaded (a user's CAD STL, repaired), the camera centre as the viewpoint.
 Errors are symmetry-aware (:func:`asmteach.core.symmetry.equivalent_transforms`,
 turns about an axis of revolution included): position of the part origin in
 mm, geodesic rotation in degrees, of the rough pose. A scene succeeds when
@@ -25,7 +25,7 @@ import numpy as np
 import trimesh
 
 from asmteach.core import registry
-from asmteach.core.config import TableSettings
+from asmteach.core.config import ExecutionSettings, TableSettings
 from asmteach.core.detect_correct import resolve_by_views
 from asmteach.core.hooks import hookimpl
 from asmteach.core.interfaces import Detector, PartModel
@@ -41,6 +41,9 @@ from asmteach.plugins.detectors.cvfh.close_look import CloseLooks, free_looks
 from asmteach.plugins.detectors.cvfh.scenes import default_camera_pose, place_on_table, render_table_scene
 
 __all__ = ["AREA", "asmteach_measure_part", "rest_poses", "run_part", "scene_pose"]
+
+DEPTH_FRAMES = int(ExecutionSettings.model_fields["depth_frames"].default)
+"""Kinect frames stacked per fixed view, as a run senses by default (``execution.depth_frames``)."""
 
 AREA = (0.24, 0.34)
 """Work-area extent (x, y, metres) the part's centre is drawn from, around the work centre (0.45, 0)."""
@@ -111,6 +114,7 @@ def run_part(
     T_cam2: np.ndarray | None = None,
     close_looks: int = 0,
     look_settings: ViewChoiceSettings | None = None,
+    frames: int = DEPTH_FRAMES,
 ) -> list[dict]:
     """Render ``scenes`` scenes of ``mesh`` (the truth) and detect ``part`` (as loaded) in each.
 
@@ -121,6 +125,8 @@ def run_part(
     best-ranked viewpoints (:func:`~asmteach.plugins.detectors.cvfh.close_look.free_looks`, ``look_settings``
     the candidates): ``look_*`` keys after one Kinect and the looks, ``two_look_*`` after both Kinects and the
     looks (looked at only when both Kinects leave it ambiguous; else the two-view outcome).
+    ``frames``: Kinect frames stacked into each fixed view's cloud, new noise in each (a run's
+    ``execution.depth_frames``; the first frame is the one a single-frame scene has); a wrist look takes one.
     """
     table = TableSettings()
     com = np.asarray(mesh.center_mass, float)
@@ -135,10 +141,8 @@ def run_part(
     for i in range(scenes):
         rng = np.random.default_rng([seed, i, 22])
         k, yaw, T_true = scene_pose(mesh, rests, probs, rng, table)
-        scene = render_table_scene(
-            DepthCamera(KinectSettings(), seed=1000 * seed + i), mesh, T_true, table=table, T_world_cam=T_cam
-        )
-        det = detector.detect(scene.cloud, part, viewpoint=T_cam[:3, 3])
+        scene, cloud = _stacked(DepthCamera(KinectSettings(), seed=1000 * seed + i), mesh, T_true, table, T_cam, frames)
+        det = detector.detect(cloud, part, viewpoint=T_cam[:3, 3])
         row = {
             "part": name,
             "scene": i,
@@ -156,7 +160,7 @@ def run_part(
         row["truth_in_alternatives"] = any(
             pose_error(T, T_true, right=syms).within(tol_mm, tol_deg) or same.same(T, T_true, tol_mm) for T in alts
         )
-        views = [DepthView(scene.cloud, T_cam[:3, 3])]
+        views = [DepthView(cloud, T_cam[:3, 3])]
         # the free wrist camera's looks, the same for what one Kinect and what both leave ambiguous
         look = {
             "looks": close_looks,
@@ -169,10 +173,9 @@ def run_part(
             got = free_looks(det, part, (mesh, T_true), views, scene.table, **look)
             row.update(_look_row("look_", got, T_true, syms, tol_mm, tol_deg, same))
         if T_cam2 is not None:
-            other = render_table_scene(
-                DepthCamera(KinectSettings(), seed=1000 * seed + i + 500), mesh, T_true, table=table, T_world_cam=T_cam2
-            )
-            two_views = [*views, DepthView(other.cloud, T_cam2[:3, 3])]
+            camera2 = DepthCamera(KinectSettings(), seed=1000 * seed + i + 500)
+            _, other = _stacked(camera2, mesh, T_true, table, T_cam2, frames)
+            two_views = [*views, DepthView(other, T_cam2[:3, 3])]
             two = resolve_by_views(det, part, two_views, scene.table, syms)
             row.update({f"two_{k}": v for k, v in _outcome(two, T_true, syms, tol_mm, tol_deg, same).items()})
             judged = two.details.get("resolved_by_view") or two.details.get("second_view") or {}
@@ -189,6 +192,15 @@ def run_part(
                 row.update(_look_row("two_look_", got, T_true, syms, tol_mm, tol_deg, same))
         rows.append(row)
     return rows
+
+
+def _stacked(
+    camera: DepthCamera, mesh: trimesh.Trimesh, T_true: np.ndarray, table: TableSettings, T_cam: np.ndarray, frames: int
+) -> tuple[Any, np.ndarray]:
+    """``(the first frame's scene, the cloud of ``frames`` frames stacked)``: one camera, new noise in each frame,
+    as a run senses (:func:`asmteach.core.pipeline.detect.sense_views`); world frame, metres."""
+    shots = [render_table_scene(camera, mesh, T_true, table=table, T_world_cam=T_cam) for _ in range(frames)]
+    return shots[0], np.concatenate([shot.cloud for shot in shots])
 
 
 def _look_row(
@@ -221,7 +233,8 @@ def asmteach_measure_part(
     if stage != "detection":
         return None
     detector = registry.create("detectors", str(options.get("detector", "cvfh_icp")), {}, seed=seed)
-    rows = run_part(part.name, part.mesh, part, detector, int(options.get("scenes", 5)), seed)
+    frames = int(options.get("frames", DEPTH_FRAMES))
+    rows = run_part(part.name, part.mesh, part, detector, int(options.get("scenes", 5)), seed, frames=frames)
     return {
         "scenes": len(rows),
         "found": sum(r["found"] for r in rows),
