@@ -202,3 +202,46 @@ def test_slide_on_table_fits_the_view_along_the_table_and_keeps_the_rest_height_
     assert mm < 0.2 and deg < 0.2
     assert got[2, 3] == pytest.approx(off[2, 3], abs=1e-9)  # the height the rest gave
     assert got[:3, 2] == pytest.approx(off[:3, 2], abs=1e-9)  # and its tilt
+
+
+def test_a_pose_the_view_pins_but_icp_left_tilted_settles_at_its_rest(tmp_path: Path) -> None:
+    """A block seen by the Kinect, its pose tilted 3 deg (as ICP leaves a smooth part: the filleted block, the
+    duck): settled at its nearest rest and slid along the table, it is the truth within 0.5 mm / 0.3 deg; a
+    block leaning 20 deg (on something) is beyond ``rest_snap_deg`` of any rest and stays as it is."""
+    from asmteach.core.models import TablePlane
+    from asmteach.core.parts import PartSpec, build_part
+    from asmteach.core.perception.depth_camera import DepthCamera, KinectSettings, look_at
+    from asmteach.core.perception.registration import verify
+    from asmteach.core.perception.viewpoint import StageClock
+    from asmteach.plugins.detectors.cvfh.detector import CvfhIcpDetector
+    from asmteach.plugins.detectors.cvfh.pose_search import ClusterJob, settle
+    from asmteach.plugins.detectors.cvfh.scenes import place_on_table, render_table_scene
+
+    (tmp_path / "b.stl").write_bytes(trimesh.creation.box(extents=[0.05, 0.035, 0.025]).export(file_type="stl"))
+    part = build_part(PartSpec(name="b", mesh=str(tmp_path / "b.stl"), mesh_units="m"))
+    detector = CvfhIcpDetector({"views": {"cache_dir": str(tmp_path)}}, seed=0)
+    prep = detector._prep(part)
+    s = CvfhSettings()
+    eye = np.array([1.05, 0.0, 0.75])
+    T = place_on_table(part.mesh, np.eye(4), 0.4, (0.45, 0.05))
+    scene = render_table_scene(
+        DepthCamera(KinectSettings(), seed=3), part.mesh, T, T_world_cam=look_at(eye, [0.45, 0.0, 0.0])
+    )
+    pts = scene.cloud[np.isfinite(scene.cloud).all(axis=1)]
+    cluster = pts[(np.linalg.norm(pts[:, :2] - T[:2, 3], axis=1) < 0.05) & (pts[:, 2] > 0.007)]
+    context = pts[np.linalg.norm(pts - T[:3, 3], axis=1) < 0.08]
+    job = ClusterJob(cluster, context, cluster, cluster, TablePlane(height=0.0), eye)
+    centre = T[:3, 3].copy()
+
+    def tilted(deg: float) -> np.ndarray:
+        R = geometry.from_rotvec(np.radians(deg) * np.array([0.0, 1.0, 0.0]))[:3, :3]
+        return geometry.from_rotation(R, centre - R @ centre) @ T
+
+    off = verify(tilted(3.0), cluster, context, eye, prep.model, s.refine, job.table)
+    assert off.accepted  # the view lets a 3 deg tilt through
+    got = settle(off, job, prep, StageClock(), s)
+    assert got is not None and got.accepted
+    mm, deg = poses_apart(got.T_world_part, T, prep.own)
+    assert mm < 0.5 and deg < 0.3
+    leaning = verify(tilted(20.0), cluster, context, eye, prep.model, s.refine, job.table)
+    assert settle(leaning, job, prep, StageClock(), s) is None
