@@ -47,6 +47,10 @@ class PartCorpusParams(StrictModel):
     corpus_seed: int = Field(0, description="seed of the corpus sizes (not the trial seed)")
     open_faces: int = Field(3, ge=0, description="triangles left out of the STL, as CAD exports do")
     scenes: int = Field(5, ge=1, description="detection: scenes per part")
+    frames: int = Field(4, ge=1, le=30, description="detection: depth frames stacked per fixed view, as a run senses")
+    close_looks: int = Field(
+        2, ge=0, le=10, description="detection: wrist-camera looks at a pose the view leaves ambiguous, as a run"
+    )
     max_protrusion_mm: float = Field(0.1, gt=0, description="collision: largest protrusion that passes, mm")
     max_uncovered_mm: float = Field(0.1, gt=0, description="collision: largest uncovered distance that passes, mm")
 
@@ -118,8 +122,9 @@ class PartCorpus(Experiment):
             }
         else:
             pm = make_plugin_manager(progress=False)
+            options = {"scenes": params.scenes, "frames": params.frames, "close_looks": params.close_looks}
             metrics = pm.hook.asmteach_measure_part(
-                part=part, stage=params.stage, seed=seed, workdir=Path(workdir), options={"scenes": params.scenes}
+                part=part, stage=params.stage, seed=seed, workdir=Path(workdir), options=options
             )
             if metrics is None:
                 raise UserError(f"no installed plugin measures the {params.stage!r} stage (asmteach_measure_part)")

@@ -38,3 +38,20 @@ def test_targets_per_stage() -> None:
     assert not passed("detection", {"wrong_found": 1, "success": 5, "scenes": 5})
     assert passed("detection", {"wrong_found": 0, "success": 5, "scenes": 5})
     assert not passed("collision", {"protrusion_mm": 0.3, "max_protrusion_mm": 0.1})
+
+
+def test_the_detection_sweep_config_detects_as_a_run_does() -> None:
+    """configs/experiments/part_corpus_detection.yaml: the detection stage of every corpus part, with a run's four
+    stacked Kinect frames and two wrist looks (the defaults, written out)."""
+    import yaml
+
+    from asmteach.core.corpus import part_corpus
+    from asmteach.core.corpus_sweep import PartCorpusParams
+
+    root = Path(__file__).resolve().parents[2]
+    cfg = yaml.safe_load((root / "configs/experiments/part_corpus_detection.yaml").read_text())
+    assert cfg["experiment"] == "part_corpus"
+    params = PartCorpusParams(**cfg["params"])
+    assert params.stage == "detection" and params.frames == 4 and params.close_looks == 2
+    assert PartCorpusParams(part="tube_0", stage="detection").frames == params.frames
+    assert sorted(cfg["grid"]["part"]) == sorted(p.name for p in part_corpus(seed=0))

@@ -37,13 +37,16 @@ from asmteach.core.pose_error import pose_error
 from asmteach.core.rests.drops import drop_rests, likely_rests
 from asmteach.core.symmetry import equivalent_transforms
 from asmteach.core.symmetry.near import NearSymmetry
-from asmteach.plugins.detectors.cvfh.close_look import CloseLooks, free_looks
+from asmteach.plugins.detectors.cvfh.close_look import REACH_REGION, CloseLooks, free_looks
 from asmteach.plugins.detectors.cvfh.scenes import default_camera_pose, place_on_table, render_table_scene
 
 __all__ = ["AREA", "asmteach_measure_part", "rest_poses", "run_part", "scene_pose"]
 
 DEPTH_FRAMES = int(ExecutionSettings.model_fields["depth_frames"].default)
 """Kinect frames stacked per fixed view, as a run senses by default (``execution.depth_frames``)."""
+
+LOOKS = int(ExecutionSettings.model_fields["look_closer"].default)
+"""Wrist-camera looks at an ambiguous detection, as a run takes them by default (``execution.look_closer``)."""
 
 AREA = (0.24, 0.34)
 """Work-area extent (x, y, metres) the part's centre is drawn from, around the work centre (0.45, 0)."""
@@ -229,18 +232,42 @@ def _look_row(
 def asmteach_measure_part(
     part: PartModel, stage: str, seed: int, workdir: Path, options: dict[str, Any]
 ) -> dict[str, Any] | None:
-    """Detection on ``options["scenes"]`` seeded scenes of ``part``; ``None`` for other stages."""
+    """Detection on ``options["scenes"]`` seeded scenes of ``part``; ``None`` for other stages.
+
+    As a run detects: one Kinect (``frames`` stacked frames, default ``execution.depth_frames``) and up to
+    ``close_looks`` looks of a wrist camera in the reach region when it leaves the pose ambiguous (default 2, as
+    ``execution.look_closer``; a free camera, :func:`~asmteach.plugins.detectors.cvfh.close_look.free_looks`).
+    ``found`` / ``success`` / ``wrong_found`` are after the looks, ``view_*`` the Kinect's view alone.
+    """
     if stage != "detection":
         return None
     detector = registry.create("detectors", str(options.get("detector", "cvfh_icp")), {}, seed=seed)
+    looks = int(options.get("close_looks", LOOKS))
     frames = int(options.get("frames", DEPTH_FRAMES))
-    rows = run_part(part.name, part.mesh, part, detector, int(options.get("scenes", 5)), seed, frames=frames)
+    rows = run_part(
+        part.name,
+        part.mesh,
+        part,
+        detector,
+        int(options.get("scenes", 5)),
+        seed,
+        close_looks=looks,
+        look_settings=REACH_REGION,
+        frames=frames,
+    )
+    p = "look_" if looks else ""
     return {
         "scenes": len(rows),
-        "found": sum(r["found"] for r in rows),
-        "success": sum(r["success"] for r in rows),
-        "wrong_found": sum(r["wrong_found"] for r in rows),
-        "max_pos_mm_found": max((r["pos_mm"] for r in rows if r["found"]), default=0.0),
-        "max_rot_deg_found": max((r["rot_deg"] for r in rows if r["found"]), default=0.0),
-        "reasons": "; ".join(sorted({r["reason"][:80] for r in rows if not r["found"]})),
+        "frames": frames,
+        "close_looks": looks,
+        "found": sum(r[f"{p}found"] for r in rows),
+        "success": sum(r[f"{p}success"] for r in rows),
+        "wrong_found": sum(r[f"{p}wrong_found"] for r in rows),
+        "view_found": sum(r["found"] for r in rows),
+        "view_success": sum(r["success"] for r in rows),
+        "view_wrong_found": sum(r["wrong_found"] for r in rows),
+        "looks_taken": sum(int(r.get("look_n") or 0) for r in rows),
+        "max_pos_mm_found": max((r[f"{p}pos_mm"] for r in rows if r[f"{p}found"]), default=0.0),
+        "max_rot_deg_found": max((r[f"{p}rot_deg"] for r in rows if r[f"{p}found"]), default=0.0),
+        "reasons": "; ".join(sorted({r[f"{p}reason"][:80] for r in rows if not r[f"{p}found"]})),
     }

@@ -16,6 +16,8 @@ def test_a_plain_part_is_found_in_its_scenes(tmp_path: Path) -> None:
     assert out is not None and out["scenes"] == 2
     assert out["success"] == 2 and out["wrong_found"] == 0
     assert out["max_pos_mm_found"] <= 5.0 and out["max_rot_deg_found"] <= 5.0
+    assert out["frames"] == 4 and out["close_looks"] == 2  # as a run senses and looks by default
+    assert out["view_success"] <= out["success"]  # the looks only ever add to what the Kinect's view found
     assert asmteach_measure_part(part=part, stage="grasps", seed=0, workdir=tmp_path, options={}) is None
 
 
