@@ -331,33 +331,41 @@ def rest_pass(
     (:func:`~asmteach.plugins.detectors.cvfh.resting.slide_on_table`) and verified. The rests are
     :attr:`Prepared.every_rest`, every hull facet the centre of mass lies over, however unlikely: with only the
     likely rests, a keyed peg lying on a facet of its round side, key sideways, was put on the likeliest rest near
-    it, key down, which the view could not refute. The best-scoring verified resting pose is the answer when no
-    other distinct one is a rival (:func:`_rivals`, as for near twins). ``None`` when none verifies or two distinct
-    resting poses explain the view as well. World frame, metres.
+    it, key down, which the view could not refute. The answer is the verified resting pose when there is one and only
+    one (up to the part's symmetries and same surface). ``None`` when one of ``poses`` has no verified resting pose
+    near it (the truth may be that one, at a rest verification refuses) or two distinct resting poses verify (the
+    view could not tell its poses apart; the table does not tell these). World frame, metres.
     """
     if s.rest_rivals_deg <= 0.0 or not len(prep.every_rest):
         return None
     resting: list[Verdict] = []
-    tried: list[np.ndarray] = []
+    tried: list[tuple[np.ndarray, bool]] = []  # resting poses verified so far, and whether each was accepted
     for T in poses:
+        rests_ok = False
         for Tr, _ in rests_near(T, prep.every_rest, prep.model, job.table, s.rest_rivals_deg):
-            if not is_distinct(Tr, tried, prep.own, s, same=prep.same):
+            seen = [ok for U, ok in tried if not is_distinct(Tr, [U], prep.own, s, same=prep.same)]
+            if seen:
+                rests_ok |= any(seen)
                 continue
-            tried.append(Tr)
             Tr = slide_on_table(Tr, job.icp_in, prep.model, job.table, s.refine.inlier_distance)
             v = verify(Tr, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
             clock.lap("verify")
+            tried.append((Tr, v.accepted))
             if not v.accepted:
                 continue
-            if any(_rivals(u, [v], job, prep, s) and _rivals(v, [u], job, prep, s) for u in resting):
-                # two resting poses the view cannot tell apart either way: the table does not decide (the rest are
-                # not verified: a keyed peg on its round side has a rest every 5.6 deg, dozens near the rivals)
+            rests_ok = True
+            if resting:
+                # two distinct resting poses the view accepts: the table does not decide between them, and the view
+                # already could not (a keyed peg on its round side has a rest every 5.6 deg, dozens near the rivals;
+                # picking the better-scoring of two, rod_1 seen as a CAD STL was found 90 deg off)
                 return None
             resting.append(v)
-    if not resting:
-        return None
-    resting.sort(key=lambda v: -v.score)
-    return None if _rivals(resting[0], resting[1:], job, prep, s) else resting[0]
+        if not rests_ok:
+            # a pose the view allows with no resting pose the view accepts near it: the truth may be that pose,
+            # at a rest verification refuses (a rod with four stacked frames: its fitness 0.93-0.94 < 0.95), so
+            # the rest that verified is no answer (rod_1 seen as a CAD STL: found 90 deg off)
+            return None
+    return resting[0] if resting else None
 
 
 def _at_nearest_rest(T: np.ndarray, job: ClusterJob, prep: Prepared, s: CvfhSettings) -> np.ndarray | None:
