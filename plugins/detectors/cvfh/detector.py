@@ -386,15 +386,11 @@ class CvfhIcpDetector(Detector):
             if rested is not None:
                 # ICP tilts a part the view pins otherwise (a filleted block 2.9 deg, the duck 3.1 deg, with four
                 # stacked frames: over the 5 deg line at times); at its rest the table gives its tilt
-                info["at_rest"] = {"rivals": "none", "turn_deg": round(float(_turn_deg(best, rested)), 2)}
+                turn = np.degrees(geometry.rotation_distance(best.T_world_part, rested.T_world_part))
+                info["at_rest"] = {"rivals": "none", "turn_deg": round(float(turn), 2)}
                 best = rested
         info = {**info, "hypotheses": len(hyps), "cluster_points": len(cluster)}
         return _Outcome(best, closest, info, job.icp_passes)
-
-
-def _turn_deg(a: Verdict, b: Verdict) -> float:
-    """The turn (deg) between two verdicts' poses."""
-    return float(np.degrees(geometry.rotation_angle(a.T_world_part[:3, :3].T @ b.T_world_part[:3, :3])))
 
 
 def _width(points: np.ndarray) -> float:

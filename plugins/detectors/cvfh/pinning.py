@@ -19,6 +19,7 @@ from asmteach.core import geometry
 from asmteach.core.clouds import depth_sigma
 from asmteach.core.symmetry import SymmetryFinder, axis_rotations, principal_frame
 from asmteach.plugins.detectors.cvfh.pose_search import ClusterJob, Prepared
+from asmteach.plugins.detectors.cvfh.resting import table_frame
 from asmteach.plugins.detectors.cvfh.settings import CvfhSettings
 
 __all__ = ["free_axes", "pin_rivals", "rotation_sigma_deg", "weakest_turn"]
@@ -127,9 +128,7 @@ def pin_rivals(
     """
     free = np.zeros((0, 3))
     if at_rest:
-        n = np.asarray(job.table.normal, float)
-        tilts = np.linalg.svd(np.eye(3) - np.outer(n, n) / float(n @ n))[0][:, :2].T  # world axes across the normal
-        free = tilts @ T[:3, :3]  # part frame
+        free = table_frame(job.table)[:3, :2].T @ T[:3, :3]  # the turns about axes along the table, part frame
     for _ in range(3):
         sigma, axis, centre = weakest_turn(T, job, prep, s.refine.inlier_distance, free)
         if s.pin_sigmas * sigma <= s.distinct_deg:

@@ -104,6 +104,10 @@ class ClusterJob:
         eye = self.eye if s.visible_icp else None
         return icp_refine(points, model, T_world_part, s, viewpoint=eye, **passes)
 
+    def verify(self, T_world_part: np.ndarray, model: ModelCloud, s: RefineSettings) -> Verdict:
+        """:func:`verify` of a pose against this cluster and its context, seen from :attr:`eye`, on :attr:`table`."""
+        return verify(T_world_part, self.cluster, self.context, self.eye, model, s, self.table)
+
 
 def view_hypotheses(
     desc: CloudDescription, db: ViewDatabase, T_world_vcam: np.ndarray, s: CvfhSettings
@@ -179,7 +183,7 @@ def verify_rounds(
                 # hypothesis (ff_lower_leg3 scenes 2 and 4: fitness 0.89-0.90 after ICP)
                 at_rest = _at_nearest_rest(T0, job, prep, s)
                 if at_rest is not None:
-                    alt = verify(at_rest, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+                    alt = job.verify(at_rest, prep.model, s.refine)
                     v = alt if alt.accepted else v
             clock.lap("verify")
             accepted += v.accepted
@@ -203,13 +207,13 @@ def verify_at_rest(T_world_part: np.ndarray, job: ClusterJob, prep: Prepared, s:
     15 mm tall turned over, its legs cut off half-way) leaves ICP free to tilt it. The snapped pose faces
     the same checks; rivals in the twin passes get the same chance.
     """
-    v = verify(T_world_part, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+    v = job.verify(T_world_part, prep.model, s.refine)
     if v.accepted or s.rest_snap_deg <= 0.0 or not len(prep.rests):
         return v
     T, deg = snap_to_rest(T_world_part, prep.rests, prep.model, job.table)
     if deg > s.rest_snap_deg:
         return v
-    snapped = verify(T, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+    snapped = job.verify(T, prep.model, s.refine)
     return snapped if snapped.accepted else v
 
 
@@ -278,7 +282,7 @@ def near_twin_pass(
             # the turned pose also at its rest, slid along the table: ICP, free in six, drifts a thin part off the
             # pose the view and the table agree on (ff_lower_leg3 scene 0: the truth scores 0.970 where it is,
             # and ICP from it drifts 16 deg and fails; the pose found, turned over, scored 0.958)
-            v = verify(at_rest, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+            v = job.verify(at_rest, prep.model, s.refine)
             clock.lap("verify")
             if v.accepted:
                 found.append(v)
@@ -348,7 +352,7 @@ def rest_pass(
                 rests_ok |= any(seen)
                 continue
             Tr = slide_on_table(Tr, job.icp_in, prep.model, job.table, s.refine.inlier_distance)
-            v = verify(Tr, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+            v = job.verify(Tr, prep.model, s.refine)
             clock.lap("verify")
             tried.append((Tr, v.accepted))
             if not v.accepted:
@@ -389,7 +393,7 @@ def settle(best: Verdict, job: ClusterJob, prep: Prepared, clock: StageClock, s:
     T = _at_nearest_rest(best.T_world_part, job, prep, s)
     if T is None:
         return None
-    v = verify(T, job.cluster, job.context, job.eye, prep.model, s.refine, job.table)
+    v = job.verify(T, prep.model, s.refine)
     clock.lap("verify")
     return v if v.accepted and v.score >= best.score - s.ambiguity_margin else None
 

@@ -260,9 +260,7 @@ def slide_on_table(
     """
     import open3d as o3d
 
-    n = np.asarray(table.normal, float)
-    n = n / np.linalg.norm(n)
-    e1, e2 = np.linalg.svd(np.eye(3) - np.outer(n, n))[0][:, :2].T  # two directions along the table
+    e1, e2, n = table_frame(table)[:3, :3].T  # two directions along the table, and its normal
     T = np.asarray(T_world_part, float).copy()
     pts = np.asarray(points, float)
     for _ in range(iterations):
