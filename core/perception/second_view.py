@@ -369,18 +369,18 @@ def judge_rivals(
     usable = [
         DepthView(np.asarray(v.cloud, float)[_in_cone(v, centers, radius)], v.viewpoint, v.sensor) for v in usable
     ]
-    raw, _ = _all_costs(model, cands, usable, table, sensor, s, cands)
+    rays = [_rays(model, v, cands, sensor, s) for v in usable]  # every pose below is scored on these rays
+    raw, _ = _all_costs(model, cands, rays, table, s)
     raw_total = raw.sum(axis=1)
     # The grid only finds the basins: the poses compared are the rivals and the cheapest candidates, each
     # refined on every view, so that a neighbour a grid step away is not taken for a rival.
     seeds = list(range(len(poses))) + [int(i) for i in np.argsort(raw_total)[: s.refine_top] if i >= len(poses)]
     # the rivals as listed stay in the pool: when every refined pose falls on one, the listed rivals still
     # have to lose by the margin (the comparison is never empty)
-    rays = [_rays(model, v, cands, sensor, s) for v in usable]
     pool = _polished(
         model, [_fused_refine(model, cands[i], usable, table) for i in seeds] + cands[: len(poses)], rays, table, s
     )
-    costs, on_part = _all_costs(model, pool, usable, table, sensor, s, cands)
+    costs, on_part = _all_costs(model, pool, rays, table, s)
     best = int(np.argmin(costs.sum(axis=1)))
     # The best pose's near twins must lose too: a twin differs only where a view may not look (a blind hole
     # facing the table) and the grid's cheapest need not reach its basin (a close view's sub-mm sigma makes a
@@ -388,7 +388,7 @@ def judge_rivals(
     twins = [pool[best] @ S for S in near_twins(mesh, s.step_deg, s.twin_mm)]
     if twins:
         pool += _polished(model, [_fused_refine(model, T, usable, table) for T in twins], rays, table, s)
-        costs, on_part = _all_costs(model, pool, usable, table, sensor, s, cands)
+        costs, on_part = _all_costs(model, pool, rays, table, s)
         best = int(np.argmin(costs.sum(axis=1)))
     # The winner's own misfit measures how far neighbouring rays are independent evidence: a close view's
     # neighbours misfit together (an edge a fraction of a millimetre off, a hole wall's shade), so each ray's cost
@@ -460,17 +460,13 @@ def _apart(A: np.ndarray, B: np.ndarray, syms: np.ndarray) -> tuple[float, float
 
 
 def _all_costs(
-    model: ModelCloud,
-    poses: list[np.ndarray],
-    views: list[DepthView],
-    table: TablePlane,
-    sensor: KinectSettings | None,
-    s: SecondViewSettings,
-    around: list[np.ndarray],
+    model: ModelCloud, poses: list[np.ndarray], rays: list[_Rays], table: TablePlane, s: SecondViewSettings
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Ray costs and on-part flags of ``poses`` over every view's rays near the ``around`` poses, side by side."""
-    parts = [ray_costs(model, poses, v, table, sensor, s, around) for v in views]
-    return np.hstack([c for c, _ in parts]), np.hstack([o for _, o in parts])
+    """Ray costs ``(k, m)`` and on-part flags of ``poses`` over every view's ``rays``, side by side."""
+    parts = [[_costs_on(model, T, r, table, s) for r in rays] for T in poses]
+    costs = np.array([np.concatenate([c for c, _ in row]) for row in parts]).reshape(len(poses), -1)
+    on_part = np.array([np.concatenate([o for _, o in row]) for row in parts]).reshape(len(poses), -1)
+    return costs, on_part
 
 
 def _all_blocks(
